@@ -1,0 +1,171 @@
+"""`groundstation ...` - the command-line entry point.
+
+    groundstation run                      the main job (live view of the simulated testbed)
+    groundstation sim [--tcp-port 5020]    run the simulated testbed
+    groundstation monitor --device ADDR    connect and print live link statistics
+    groundstation protocol info|check      the protocol dictionary
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import os
+import signal
+import sys
+import threading
+import time
+
+from . import __version__
+from .dictionary import load_dictionary
+from .errors import GroundStationError
+
+log = logging.getLogger("groundstation")
+
+
+def _cmd_protocol(args) -> int:
+    d = load_dictionary(args.protocol_dir)
+    if args.action == "check":
+        print(f"protocol {d.name} {d.version}: {len(d.packets)} packets, {len(d.commands)} "
+              f"commands, {len(d.parameters)} parameters - OK (hash {d.hash:08x})")
+        return 0
+    print(f"protocol {d.name} version {d.version}  dictionary hash {d.hash:08x}")
+    for p in d.packets:
+        size = f"{p.fixed_payload_size}+ bytes" if p.variable_item else f"{p.fixed_payload_size} bytes"
+        rate = f" @ {p.rate_hz:g} Hz" if p.rate_hz else ""
+        print(f"  packet 0x{p.id:02X} {p.name:<13} {size:>10}{rate}  {len(p.items)} items")
+    for c in d.commands:
+        flag = " critical" if c.critical else ""
+        print(f"  command 0x{c.opcode:04X} {c.name:<15}{flag}")
+    return 0
+
+
+def _cmd_sim(args) -> int:
+    from .sim import SimulatedDevice
+
+    dev = SimulatedDevice(load_dictionary(args.protocol_dir), host=args.host,
+                          tcp_port=args.tcp_port, pacing=args.pacing, seed=args.seed,
+                          frames_per_datagram=args.frames_per_datagram)
+    dev.start()
+    if args.announce:
+        print(f"LISTENING tcp://{dev.host}:{dev.tcp_port}", flush=True)
+    else:
+        print(f"simulated testbed on tcp://{dev.host}:{dev.tcp_port} (Ctrl-C to stop)", flush=True)
+    master = None
+    if args.pty:
+        import tty
+
+        master, slave = os.openpty()
+        tty.setraw(master)
+        tty.setraw(slave)
+        from .link.transports import SerialStream
+
+        name = os.ttyname(slave)
+        dev.attach_stream(SerialStream(name, 921600))
+        print(f"serial link on serial://{os.ttyname(master)}", flush=True)
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    try:
+        while not stop.wait(0.5):
+            pass
+    except KeyboardInterrupt:
+        pass
+    finally:
+        dev.stop()
+    return 0
+
+
+def _cmd_monitor(args) -> int:
+    from .link import format_snapshot, open_client
+    from .sim.process import SimulatorProcess
+
+    d = load_dictionary(args.protocol_dir)
+    sim = None
+    address = args.device
+    if address == "sim":
+        sim = SimulatorProcess(pacing="realtime")
+        address = sim.start()
+        print(f"started the simulated testbed on {address}", flush=True)
+    try:
+        client = open_client(d, address)
+        try:
+            result = client.connect(take_over=args.take_over)
+            info = client.command("GET_INFO").reply
+            print(f"connected to {address}: {info['description']} - firmware "
+                  f"{info['firmware_version'] >> 16}.{(info['firmware_version'] >> 8) & 255}."
+                  f"{info['firmware_version'] & 255}, protocol {d.version}, session "
+                  f"{result.reply['session_token']:08x}", flush=True)
+            t_end = time.monotonic() + args.duration if args.duration else None
+            while t_end is None or time.monotonic() < t_end:
+                time.sleep(args.interval)
+                if client.link_state != "up":
+                    print(f"link {client.link_state}: {client.link_error}", flush=True)
+                    return 1
+                print(format_snapshot(client.stats.snapshot()), flush=True)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            client.close()
+    finally:
+        if sim is not None:
+            sim.stop()
+    return 0
+
+
+def _cmd_run(args) -> int:
+    print("live link statistics of the simulated testbed (Ctrl-C to stop)", flush=True)
+    args.device = "sim"
+    return _cmd_monitor(args)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="groundstation",
+                                description="Ground station for hybrid-flexure-bearing testbeds")
+    p.add_argument("--version", action="version", version=f"groundstation {__version__}")
+    p.add_argument("--protocol-dir", default=None,
+                   help="directory with telemetry/commands/parameters.toml (default: protocol/)")
+    p.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("protocol", help="show or check the protocol dictionary")
+    s.add_argument("action", choices=["info", "check"])
+    s.set_defaults(func=_cmd_protocol)
+
+    s = sub.add_parser("sim", help="run the simulated testbed")
+    s.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
+    s.add_argument("--tcp-port", type=int, default=5020, help="command port (0: any free port)")
+    s.add_argument("--pacing", choices=["realtime", "fast"], default="realtime")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--frames-per-datagram", type=int, default=1)
+    s.add_argument("--pty", action="store_true",
+                   help="also serve a serial link on a pseudo-terminal (prints its name)")
+    s.add_argument("--announce", action="store_true", help=argparse.SUPPRESS)
+    s.set_defaults(func=_cmd_sim)
+
+    for name, helptext in (("monitor", "connect to a device and print live link statistics"),
+                           ("run", "the main job: live view of the simulated testbed")):
+        s = sub.add_parser(name, help=helptext)
+        if name == "monitor":
+            s.add_argument("--device", default="sim",
+                           help="sim | tcp://HOST:PORT | HOST:PORT | serial://PORT?baud=N")
+        s.add_argument("--duration", type=float, default=0.0, help="seconds (0: until Ctrl-C)")
+        s.add_argument("--interval", type=float, default=1.0, help="seconds between lines")
+        s.add_argument("--take-over", action="store_true",
+                       help="take the session over from another host")
+        s.set_defaults(func=_cmd_monitor if name == "monitor" else _cmd_run)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="%(asctime)s %(levelname)s %(name)s: %(message)s")
+    try:
+        return args.func(args)
+    except GroundStationError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

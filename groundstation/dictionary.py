@@ -1,0 +1,474 @@
+"""The protocol dictionary: `protocol/*.toml` read into typed, validated records.
+
+Everything else (codec, simulated device, logs, GUI channel lists) is built from the
+`Dictionary` this module returns, so adding a channel is an edit of one TOML file.
+Errors in the files raise DictionaryError naming the file, the packet/command and key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .errors import DictionaryError
+
+#: wire type name -> big-endian numpy dtype string
+WIRE_TYPES: dict[str, str] = {
+    "u8": "u1", "u16": ">u2", "u32": ">u4", "u64": ">u8",
+    "i8": "i1", "i16": ">i2", "i32": ">i4", "i64": ">i8",
+    "f32": ">f4", "f64": ">f8",
+}
+VARIABLE_TYPES = ("str", "bytes")
+
+HEADER_SIZE = 14  # sync(2) version(1) packet_id(1) length(2) sequence(4) tick(4)
+CRC_SIZE = 4
+FRAME_OVERHEAD = HEADER_SIZE + CRC_SIZE
+
+#: Header layout; fixed by SPEC.md, repeated in telemetry.toml's [frame] for readers.
+HEADER_DTYPE = np.dtype([
+    ("sync", ">u2"), ("version", "u1"), ("packet_id", "u1"),
+    ("length", ">u2"), ("sequence", ">u4"), ("tick", ">u4"),
+])
+
+
+def default_protocol_dir() -> Path:
+    """`protocol/` beside the package, unless GROUNDSTATION_PROTOCOL_DIR says otherwise."""
+    env = os.environ.get("GROUNDSTATION_PROTOCOL_DIR")
+    if env:
+        return Path(env)
+    return Path(__file__).resolve().parent.parent / "protocol"
+
+
+@dataclass(frozen=True)
+class Limits:
+    yellow: tuple[float, float] | None = None
+    red: tuple[float, float] | None = None
+
+
+@dataclass(frozen=True)
+class Item:
+    """One field of a payload, command argument list or reply."""
+
+    name: str
+    type: str
+    units: str = ""
+    description: str = ""
+    scale: float | None = None
+    offset: float = 0.0
+    polynomial: tuple[float, ...] | None = None
+    states: dict[str, int] = field(default_factory=dict)
+    bits: dict[str, int] = field(default_factory=dict)
+    limits: Limits | None = None
+    value_range: tuple[float, float] | None = None
+
+    @property
+    def is_variable(self) -> bool:
+        return self.type in VARIABLE_TYPES
+
+    @property
+    def wire_dtype(self) -> np.dtype:
+        return np.dtype(WIRE_TYPES[self.type])
+
+    @property
+    def has_conversion(self) -> bool:
+        return self.scale is not None or self.polynomial is not None
+
+    def to_engineering(self, raw: np.ndarray) -> np.ndarray:
+        """Raw wire values -> engineering units (float64 when a conversion applies)."""
+        if self.polynomial is not None:
+            return np.polynomial.polynomial.polyval(raw.astype(np.float64), self.polynomial)
+        if self.scale is not None:
+            eng = raw.astype(np.float64)
+            eng *= self.scale
+            if self.offset:
+                eng += self.offset
+            return eng
+        return raw.astype(raw.dtype.newbyteorder("="), copy=False)
+
+    def to_raw(self, eng: Any) -> np.ndarray:
+        """Engineering values -> wire values (rounded; the inverse of to_engineering)."""
+        values = np.asarray(eng, dtype=np.float64 if self.has_conversion else None)
+        if self.polynomial is not None:
+            if len(self.polynomial) > 2:
+                raise DictionaryError(
+                    f"item '{self.name}': encoding through a polynomial of degree "
+                    f"{len(self.polynomial) - 1} is not supported (only linear)")
+            c0, c1 = (tuple(self.polynomial) + (0.0, 0.0))[:2]
+            values = (values - c0) / c1
+        elif self.scale is not None:
+            values = (values - self.offset) / self.scale
+        dt = self.wire_dtype
+        if dt.kind in "iu":
+            values = np.rint(values) if values.dtype.kind == "f" else values
+        return values
+
+
+@dataclass(frozen=True)
+class PacketDef:
+    name: str
+    id: int
+    direction: str
+    description: str
+    items: tuple[Item, ...]
+    rate_hz: float | None = None
+
+    @property
+    def fixed_items(self) -> tuple[Item, ...]:
+        return tuple(i for i in self.items if not i.is_variable)
+
+    @property
+    def variable_item(self) -> Item | None:
+        return self.items[-1] if self.items and self.items[-1].is_variable else None
+
+    @property
+    def payload_dtype(self) -> np.dtype:
+        return np.dtype([(i.name, i.wire_dtype) for i in self.fixed_items])
+
+    @property
+    def fixed_payload_size(self) -> int:
+        """Payload bytes of the fixed part (the whole payload unless variable)."""
+        return self.payload_dtype.itemsize
+
+    @property
+    def frame_dtype(self) -> np.dtype:
+        """Whole-frame record: header, fixed payload, CRC (fixed-length packets only)."""
+        fields = [(n, HEADER_DTYPE.fields[n][0]) for n in HEADER_DTYPE.names]
+        fields += [(i.name, i.wire_dtype) for i in self.fixed_items]
+        fields.append(("crc", "<u4"))
+        return np.dtype(fields)
+
+    @property
+    def item_by_name(self) -> dict[str, Item]:
+        return {i.name: i for i in self.items}
+
+    def channel_names(self) -> list[str]:
+        """Decoded column names: header counters, items, then one per status bit."""
+        names = ["sequence", "tick"] + [i.name for i in self.items]
+        for item in self.items:
+            names += list(item.bits)
+        return names
+
+
+@dataclass(frozen=True)
+class CommandDef:
+    name: str
+    opcode: int
+    description: str
+    args: tuple[Item, ...]
+    reply: tuple[Item, ...]
+    critical: bool = False
+    needs_session: bool = True
+    timeout_s: float = 1.0
+
+
+@dataclass(frozen=True)
+class ParameterDef:
+    id: int
+    name: str
+    type: str
+    units: str
+    value_range: tuple[float, float]
+    default: Any
+    description: str
+    shape: tuple[int, ...] = ()
+
+    @property
+    def dtype(self) -> np.dtype:
+        return np.dtype(WIRE_TYPES[self.type])
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape, dtype=np.int64)) * self.dtype.itemsize
+
+
+@dataclass(frozen=True)
+class Dictionary:
+    name: str
+    version_major: int
+    version_minor: int
+    control_rate_hz: float
+    sync: int
+    max_payload: int
+    packets: tuple[PacketDef, ...]
+    commands: tuple[CommandDef, ...]
+    parameters: tuple[ParameterDef, ...]
+    error_codes: dict[str, int]
+    event_codes: dict[str, int]
+    command_defaults: dict[str, float]
+    hash: int
+    source_texts: dict[str, str]
+
+    @property
+    def version(self) -> str:
+        return f"{self.version_major}.{self.version_minor}"
+
+    def packet(self, key: str | int) -> PacketDef:
+        for p in self.packets:
+            if p.name == key or p.id == key:
+                return p
+        raise DictionaryError(f"no packet {key!r} in the telemetry dictionary "
+                              f"(known: {', '.join(p.name for p in self.packets)})")
+
+    def command(self, key: str | int) -> CommandDef:
+        for c in self.commands:
+            if c.name == key or c.opcode == key:
+                return c
+        raise DictionaryError(f"no command {key!r} in the command dictionary")
+
+    def error_name(self, code: int) -> str:
+        for name, value in self.error_codes.items():
+            if value == code:
+                return name
+        return f"UNKNOWN_REASON_{code}"
+
+    def event_name(self, code: int) -> str:
+        for name, value in self.event_codes.items():
+            if value == code:
+                return name
+        return f"EVENT_{code}"
+
+
+# ---------------------------------------------------------------------------------------
+# loading and validation
+
+
+def _read_toml(path: Path) -> tuple[dict, str]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DictionaryError(f"{path}: protocol file not found") from None
+    except OSError as exc:
+        raise DictionaryError(f"{path}: cannot read ({exc.strerror})") from None
+    try:
+        return tomllib.loads(text), text
+    except tomllib.TOMLDecodeError as exc:
+        raise DictionaryError(f"{path}: malformed TOML: {exc}") from None
+
+
+def _require(table: dict, key: str, where: str, kinds: type | tuple[type, ...]):
+    if key not in table:
+        raise DictionaryError(f"{where}: missing key '{key}'")
+    value = table[key]
+    if not isinstance(value, kinds) or isinstance(value, bool) and bool not in (
+            kinds if isinstance(kinds, tuple) else (kinds,)):
+        raise DictionaryError(f"{where}: '{key}' must be {_kind_names(kinds)}, got {value!r}")
+    return value
+
+
+def _kind_names(kinds) -> str:
+    kinds = kinds if isinstance(kinds, tuple) else (kinds,)
+    return " or ".join({int: "an integer", float: "a number", str: "a string", list: "a list",
+                        dict: "a table", bool: "true/false"}.get(k, k.__name__) for k in kinds)
+
+
+def _pair(value, where: str, key: str) -> tuple[float, float]:
+    if (not isinstance(value, list) or len(value) != 2
+            or not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)
+            or value[0] > value[1]):
+        raise DictionaryError(f"{where}: '{key}' must be [min, max] with min <= max, got {value!r}")
+    return float(value[0]), float(value[1])
+
+
+def _parse_item(raw: dict, where: str) -> Item:
+    if not isinstance(raw, dict):
+        raise DictionaryError(f"{where}: each item must be a table, got {raw!r}")
+    name = _require(raw, "name", where, str)
+    where = f"{where} item '{name}'"
+    type_ = _require(raw, "type", where, str)
+    if type_ not in WIRE_TYPES and type_ not in VARIABLE_TYPES:
+        raise DictionaryError(f"{where}: unknown type '{type_}' "
+                              f"(use one of {', '.join(list(WIRE_TYPES) + list(VARIABLE_TYPES))})")
+    known = {"name", "type", "units", "description", "scale", "offset", "polynomial",
+             "states", "bits", "limits", "range"}
+    unknown = set(raw) - known
+    if unknown:
+        raise DictionaryError(f"{where}: unknown key(s) {sorted(unknown)}")
+    scale = raw.get("scale")
+    if scale is not None and (not isinstance(scale, (int, float)) or scale == 0):
+        raise DictionaryError(f"{where}: 'scale' must be a non-zero number, got {scale!r}")
+    poly = raw.get("polynomial")
+    if poly is not None:
+        if scale is not None:
+            raise DictionaryError(f"{where}: give either 'scale'/'offset' or 'polynomial', not both")
+        if not isinstance(poly, list) or not poly or not all(
+                isinstance(c, (int, float)) for c in poly):
+            raise DictionaryError(f"{where}: 'polynomial' must be a list of coefficients c0, c1, ...")
+    if (scale is not None or poly is not None) and type_ in VARIABLE_TYPES:
+        raise DictionaryError(f"{where}: a {type_} item cannot have a conversion")
+    states = raw.get("states", {})
+    bits = raw.get("bits", {})
+    if not isinstance(states, dict) or not all(isinstance(v, int) for v in states.values()):
+        raise DictionaryError(f"{where}: 'states' must map labels to integers")
+    if not isinstance(bits, dict) or not all(isinstance(v, int) for v in bits.values()):
+        raise DictionaryError(f"{where}: 'bits' must map flag names to bit numbers")
+    if bits and type_ not in WIRE_TYPES:
+        raise DictionaryError(f"{where}: 'bits' needs an integer type")
+    for flag, bit in bits.items():
+        width = np.dtype(WIRE_TYPES[type_]).itemsize * 8
+        if not 0 <= bit < width:
+            raise DictionaryError(f"{where}: bit '{flag}' = {bit} outside 0..{width - 1}")
+    limits = None
+    if "limits" in raw:
+        lim = raw["limits"]
+        if not isinstance(lim, dict) or set(lim) - {"yellow", "red"}:
+            raise DictionaryError(f"{where}: 'limits' must be {{ yellow = [lo, hi], red = [lo, hi] }}")
+        limits = Limits(
+            yellow=_pair(lim["yellow"], where, "limits.yellow") if "yellow" in lim else None,
+            red=_pair(lim["red"], where, "limits.red") if "red" in lim else None)
+        if limits.yellow and limits.red and not (
+                limits.red[0] <= limits.yellow[0] and limits.yellow[1] <= limits.red[1]):
+            raise DictionaryError(f"{where}: yellow limits must lie inside the red limits")
+    return Item(
+        name=name, type=type_, units=str(raw.get("units", "")),
+        description=str(raw.get("description", "")),
+        scale=float(scale) if scale is not None else None,
+        offset=float(raw.get("offset", 0.0)),
+        polynomial=tuple(float(c) for c in poly) if poly is not None else None,
+        states=dict(states), bits=dict(bits), limits=limits,
+        value_range=_pair(raw["range"], where, "range") if "range" in raw else None)
+
+
+def _parse_items(raw_items, where: str, reserved: set[str] = frozenset()) -> tuple[Item, ...]:
+    if not isinstance(raw_items, list):
+        raise DictionaryError(f"{where}: 'items' must be a list of tables")
+    items = tuple(_parse_item(r, where) for r in raw_items)
+    seen = set(reserved)
+    for pos, item in enumerate(items):
+        for name in [item.name, *item.bits]:
+            if name in seen:
+                raise DictionaryError(f"{where}: channel name '{name}' is used twice")
+            seen.add(name)
+        if item.is_variable and pos != len(items) - 1:
+            raise DictionaryError(f"{where}: '{item.name}' ({item.type}) must be the last item")
+    return items
+
+
+def _parse_packets(doc: dict, path: Path) -> tuple[PacketDef, ...]:
+    packets = []
+    raw_packets = doc.get("packet")
+    if not isinstance(raw_packets, list) or not raw_packets:
+        raise DictionaryError(f"{path}: no [[packet]] tables")
+    for n, raw in enumerate(raw_packets):
+        where = f"{path}: packet #{n + 1}"
+        name = _require(raw, "name", where, str)
+        where = f"{path}: packet '{name}'"
+        pid = _require(raw, "id", where, int)
+        if not 0 < pid < 256:
+            raise DictionaryError(f"{where}: id {pid} outside 1..255")
+        items = _parse_items(raw.get("items", []), where, reserved={"sequence", "tick"})
+        packets.append(PacketDef(
+            name=name, id=pid, direction=str(raw.get("direction", "device_to_host")),
+            description=str(raw.get("description", "")), items=items,
+            rate_hz=raw.get("rate_hz")))
+    for attr in ("name", "id"):
+        values = [getattr(p, attr) for p in packets]
+        dupes = {v for v in values if values.count(v) > 1}
+        if dupes:
+            raise DictionaryError(f"{path}: packet {attr} used twice: {sorted(dupes)}")
+    return tuple(packets)
+
+
+def _parse_commands(doc: dict, path: Path) -> tuple[tuple[CommandDef, ...], dict[str, float]]:
+    defaults = {"accept_timeout_s": 0.25, "retries": 3, "timeout_s": 1.0,
+                "heartbeat_period_s": 0.2}
+    defaults.update(doc.get("defaults", {}))
+    commands = []
+    raw_commands = doc.get("command")
+    if not isinstance(raw_commands, list) or not raw_commands:
+        raise DictionaryError(f"{path}: no [[command]] tables")
+    for n, raw in enumerate(raw_commands):
+        where = f"{path}: command #{n + 1}"
+        name = _require(raw, "name", where, str)
+        where = f"{path}: command '{name}'"
+        opcode = _require(raw, "opcode", where, int)
+        if not 0 < opcode < 65536:
+            raise DictionaryError(f"{where}: opcode {opcode} outside 1..65535")
+        commands.append(CommandDef(
+            name=name, opcode=opcode, description=str(raw.get("description", "")),
+            args=_parse_items(raw.get("args", []), f"{where} args"),
+            reply=_parse_items(raw.get("reply", []), f"{where} reply"),
+            critical=bool(raw.get("critical", False)),
+            needs_session=bool(raw.get("needs_session", True)),
+            timeout_s=float(raw.get("timeout_s", defaults["timeout_s"]))))
+    for attr in ("name", "opcode"):
+        values = [getattr(c, attr) for c in commands]
+        dupes = {v for v in values if values.count(v) > 1}
+        if dupes:
+            raise DictionaryError(f"{path}: command {attr} used twice: {sorted(dupes)}")
+    return tuple(commands), defaults
+
+
+def _parse_parameters(doc: dict, path: Path) -> tuple[ParameterDef, ...]:
+    params = []
+    for n, raw in enumerate(doc.get("parameter", [])):
+        where = f"{path}: parameter #{n + 1}"
+        name = _require(raw, "name", where, str)
+        where = f"{path}: parameter '{name}'"
+        type_ = _require(raw, "type", where, str)
+        if type_ not in WIRE_TYPES:
+            raise DictionaryError(f"{where}: unknown type '{type_}'")
+        shape = raw.get("shape", [])
+        if not isinstance(shape, list) or not all(isinstance(s, int) and s > 0 for s in shape):
+            raise DictionaryError(f"{where}: 'shape' must be a list of positive integers")
+        lo, hi = _pair(_require(raw, "range", where, list), where, "range")
+        default = _require(raw, "default", where, (int, float, list))
+        if not all(lo <= v <= hi for v in np.ravel(default)):
+            raise DictionaryError(f"{where}: default {default!r} outside its range [{lo}, {hi}]")
+        params.append(ParameterDef(
+            id=_require(raw, "id", where, int), name=name, type=type_,
+            units=str(raw.get("units", "")), value_range=(lo, hi), default=default,
+            description=str(raw.get("description", "")), shape=tuple(shape)))
+    ids = [p.id for p in params]
+    if len(set(ids)) != len(ids) or len({p.name for p in params}) != len(params):
+        raise DictionaryError(f"{path}: parameter ids and names must be unique")
+    return tuple(sorted(params, key=lambda p: p.id))
+
+
+def dictionary_hash(docs: dict[str, dict]) -> int:
+    """32-bit hash of the parsed dictionaries: sha256 of their canonical JSON, first 4
+    bytes big-endian.  Comments and formatting do not change it; any value does."""
+    canonical = json.dumps(docs, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    return int.from_bytes(hashlib.sha256(canonical.encode()).digest()[:4], "big")
+
+
+def load_dictionary(protocol_dir: str | Path | None = None) -> Dictionary:
+    """Read and check telemetry.toml, commands.toml and parameters.toml."""
+    base = Path(protocol_dir) if protocol_dir is not None else default_protocol_dir()
+    tlm, tlm_text = _read_toml(base / "telemetry.toml")
+    cmd, cmd_text = _read_toml(base / "commands.toml")
+    par, par_text = _read_toml(base / "parameters.toml")
+    tpath = base / "telemetry.toml"
+    proto = _require(tlm, "protocol", str(tpath), dict)
+    frame = _require(tlm, "frame", str(tpath), dict)
+    major = _require(proto, "version_major", f"{tpath}: [protocol]", int)
+    if not 0 < major < 256:
+        raise DictionaryError(f"{tpath}: [protocol] version_major must be 1..255")
+    sync = _require(frame, "sync", f"{tpath}: [frame]", int)
+    if sync != 0xEB90:
+        raise DictionaryError(f"{tpath}: [frame] sync must be 0xEB90 (SPEC.md fixes the framing)")
+    max_payload = int(frame.get("max_payload_bytes", 1024))
+    packets = _parse_packets(tlm, tpath)
+    for p in packets:
+        if p.variable_item is None and p.fixed_payload_size > max_payload:
+            raise DictionaryError(f"{tpath}: packet '{p.name}' payload of {p.fixed_payload_size} "
+                                  f"bytes exceeds max_payload_bytes = {max_payload}")
+    commands, defaults = _parse_commands(cmd, base / "commands.toml")
+    return Dictionary(
+        name=str(proto.get("name", "")), version_major=major,
+        version_minor=int(proto.get("version_minor", 0)),
+        control_rate_hz=float(proto.get("control_rate_hz", 1200)),
+        sync=sync, max_payload=max_payload, packets=packets, commands=commands,
+        parameters=_parse_parameters(par, base / "parameters.toml"),
+        error_codes=dict(cmd.get("error_codes", {})),
+        event_codes=dict(cmd.get("event_codes", {})),
+        command_defaults=defaults,
+        hash=dictionary_hash({"telemetry": tlm, "commands": cmd, "parameters": par}),
+        source_texts={"telemetry.toml": tlm_text, "commands.toml": cmd_text,
+                      "parameters.toml": par_text})

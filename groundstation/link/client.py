@@ -1,0 +1,368 @@
+"""The device client: session, verified commands, heartbeat, telemetry fan-out.
+
+Threads: one reader per link (the command stream; the UDP telemetry socket when there
+is one) and a heartbeat thread while a session is open.  Telemetry blocks go to the
+link statistics and then to every subscriber, in the reader thread: subscribers must be
+quick (the recorder and GUI put blocks on their own queues).  Commands are sent from
+the caller's thread and wait for their verification stages (SPEC.md, "Commands").
+"""
+
+from __future__ import annotations
+
+import logging
+import random
+import threading
+import time
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from ..codec import DatagramDecoder, FrameCodec, StreamDeframer, TelemetryBlock
+from ..codec.frames import decode_items, encode_items
+from ..dictionary import Dictionary
+from ..errors import (CommandArgumentError, CommandFailed, CommandRejected, CommandTimeout,
+                      DictionaryMismatchError, EncodeError, GroundStationError, LinkLostError,
+                      NotConnectedError)
+from .stats import LinkStatistics
+from .transports import StreamTransport, UdpReceiver
+
+log = logging.getLogger(__name__)
+
+STAGES = {1: "ACCEPTED", 2: "REJECTED", 3: "COMPLETED", 4: "FAILED"}
+
+
+@dataclass
+class StageRecord:
+    stage: str            # SENT, RETRY, ACCEPTED, REJECTED, COMPLETED, FAILED, TIMEOUT
+    reason: str = "OK"
+    host_time: float = 0.0
+    device_tick: int | None = None
+
+
+@dataclass
+class CommandResult:
+    name: str
+    sequence: int
+    arguments: dict[str, Any]
+    stages: list[StageRecord] = field(default_factory=list)
+    reply: dict[str, Any] = field(default_factory=dict)
+    retries: int = 0
+
+    @property
+    def final_stage(self) -> str:
+        return self.stages[-1].stage if self.stages else "UNSENT"
+
+    @property
+    def round_trip_s(self) -> float | None:
+        done = [s for s in self.stages if s.stage in ("COMPLETED", "FAILED", "REJECTED")]
+        return done[-1].host_time - self.stages[0].host_time if done else None
+
+
+class _Pending:
+    def __init__(self, result: CommandResult):
+        self.result = result
+        self.answered = threading.Event()   # ACCEPTED or REJECTED seen
+        self.finished = threading.Event()   # COMPLETED, FAILED or REJECTED seen
+        self.reply_bytes = b""
+        self.last_send = 0.0
+        self.error: Exception | None = None
+
+
+class DeviceClient:
+    """Talks to one device (the rig's controller or the simulated testbed)."""
+
+    def __init__(self, dictionary: Dictionary, command_link: StreamTransport,
+                 telemetry: UdpReceiver | None = None, *, heartbeat: bool = True):
+        self.dictionary = dictionary
+        self.codec = FrameCodec(dictionary)
+        self.command_link = command_link
+        self.telemetry = telemetry
+        self.stats = LinkStatistics(dictionary.control_rate_hz)
+        self._stream = StreamDeframer(self.codec)
+        self.stats.add_framing_source(self._stream.counters)
+        self._datagrams = DatagramDecoder(self.codec) if telemetry is not None else None
+        if self._datagrams is not None:
+            self.stats.add_framing_source(self._datagrams.counters)
+        self._subscribers: list[Callable[[TelemetryBlock], None]] = []
+        self._link_listeners: list[Callable[[str, str], None]] = []
+        self._pending: dict[int, _Pending] = {}
+        self._lock = threading.Lock()
+        self._send_lock = threading.Lock()
+        self._sequence = random.SystemRandom().randrange(1, 1 << 32)
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._heartbeat_enabled = heartbeat
+        self._heartbeat_thread: threading.Thread | None = None
+        self._session_stop = threading.Event()
+        self.session_token: int | None = None
+        self.device_info: dict[str, Any] = {}
+        self.link_state = "closed"
+        self.link_error: str = ""
+        self.heartbeat_failures = 0
+        self.unmatched_responses = 0
+        self.subscriber_errors = 0
+
+    # ------------------------------------------------------------------ plumbing
+    def subscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
+        """Call `callback(block)` for every decoded telemetry block (receiver thread)."""
+        self._subscribers.append(callback)
+
+    def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
+        """Call `callback(state, message)` on link state changes ('up', 'lost', 'closed')."""
+        self._link_listeners.append(callback)
+
+    def start(self) -> None:
+        """Start the reader threads (no I/O before this)."""
+        if self._threads:
+            return
+        self._set_state("up", "")
+        self._threads.append(threading.Thread(target=self._read_stream, name="gs-cmd-reader",
+                                              daemon=True))
+        if self.telemetry is not None:
+            self._threads.append(threading.Thread(target=self._read_datagrams,
+                                                  name="gs-udp-reader", daemon=True))
+        for t in self._threads:
+            t.start()
+
+    def _set_state(self, state: str, message: str) -> None:
+        self.link_state = state
+        self.link_error = message
+        for cb in list(self._link_listeners):
+            try:
+                cb(state, message)
+            except Exception:  # a broken listener must not take the link down
+                log.exception("link listener failed")
+
+    def _dispatch(self, blocks: list[TelemetryBlock]) -> None:
+        for block in blocks:
+            self.stats.update(block)
+            if block.name == "RESPONSE":
+                self._on_responses(block)
+                continue
+            if block.name == "EVENT":
+                for level, code, text in zip(block["level"], block["code"], block["text"]):
+                    log.info("device event %s %s: %s", level, self.dictionary.event_name(int(code)), text)
+            for cb in list(self._subscribers):
+                try:
+                    cb(block)
+                except Exception:
+                    self.subscriber_errors += 1
+                    log.exception("telemetry subscriber %r failed", cb)
+
+    def _read_stream(self) -> None:
+        while not self._stop.is_set():
+            try:
+                data = self.command_link.read(0.1)
+            except LinkLostError as exc:
+                if not self._stop.is_set():
+                    self._lost(str(exc))
+                return
+            if data:
+                self._dispatch(self._stream.feed(data, time.time()))
+
+    def _read_datagrams(self) -> None:
+        assert self.telemetry is not None and self._datagrams is not None
+        while not self._stop.is_set():
+            try:
+                datagrams, times = self.telemetry.receive(0.1)
+            except LinkLostError as exc:
+                if not self._stop.is_set():
+                    self._lost(str(exc))
+                return
+            if datagrams:
+                self._dispatch(self._datagrams.decode(datagrams, times))
+
+    def _lost(self, message: str) -> None:
+        log.error("link lost: %s", message)
+        self._session_stop.set()
+        with self._lock:
+            pending = list(self._pending.values())
+        for p in pending:
+            p.error = LinkLostError(message)
+            p.answered.set()
+            p.finished.set()
+        self._set_state("lost", message)
+
+    # ------------------------------------------------------------------ commands
+    def _on_responses(self, block: TelemetryBlock) -> None:
+        now = time.time()
+        for i in range(len(block)):
+            seq = int(block["command_sequence"][i])
+            stage = STAGES.get(int(block["stage"][i]), f"STAGE_{int(block['stage'][i])}")
+            reason = self.dictionary.error_name(int(block["reason"][i]))
+            tick = int(block["tick"][i])
+            with self._lock:
+                p = self._pending.get(seq)
+            if p is None or int(block["opcode"][i]) != self.dictionary.command(p.result.name).opcode:
+                self.unmatched_responses += 1
+                continue
+            if any(s.stage == stage for s in p.result.stages):
+                continue                     # a re-sent answer to a retried command
+            p.result.stages.append(StageRecord(stage, reason, now, tick))
+            if stage in ("ACCEPTED", "REJECTED"):
+                self.stats.clock.observe(p.last_send, now, tick)
+                p.answered.set()
+            if stage in ("COMPLETED", "FAILED", "REJECTED"):
+                p.reply_bytes = block["data"][i]
+                p.finished.set()
+
+    def command(self, name: str, *, on_stage: Callable[[StageRecord], None] | None = None,
+                **arguments: Any) -> CommandResult:
+        """Send a command and wait until it is COMPLETED; raise on REJECTED/FAILED/timeout.
+
+        Arguments are checked against commands.toml before anything is sent.  An
+        unanswered command is resent with the same sequence number (the device
+        executes it at most once)."""
+        cmd = self.dictionary.command(name)
+        if cmd.needs_session and self.session_token is None:
+            raise NotConnectedError(f"{name}: no session - connect first")
+        if self.link_state != "up":
+            raise LinkLostError(f"{name}: link is {self.link_state}"
+                                + (f" ({self.link_error})" if self.link_error else ""))
+        try:
+            args = encode_items(cmd.args, arguments, name)
+        except EncodeError as exc:
+            raise CommandArgumentError(str(exc)) from None
+        token = self.session_token or 0
+        with self._lock:
+            seq = self._sequence
+            self._sequence = (self._sequence + 1) & 0xFFFFFFFF or 1
+        payload = token.to_bytes(4, "big") + cmd.opcode.to_bytes(2, "big") + args
+        frame = self.codec.frame(self.dictionary.packet("COMMAND").id, payload, seq, 0)
+        result = CommandResult(name, seq, dict(arguments))
+        p = _Pending(result)
+        with self._lock:
+            self._pending[seq] = p
+        defaults = self.dictionary.command_defaults
+        accept_timeout = float(defaults["accept_timeout_s"])
+        try:
+            for attempt in range(int(defaults["retries"]) + 1):
+                p.last_send = time.time()
+                stage = StageRecord("SENT" if attempt == 0 else "RETRY", "OK", p.last_send)
+                result.stages.append(stage)
+                self._notify(on_stage, stage)
+                with self._send_lock:
+                    self.command_link.write(frame)
+                if p.answered.wait(accept_timeout):
+                    break
+                result.retries += 1
+            else:
+                result.stages.append(StageRecord("TIMEOUT", "NO_ANSWER", time.time()))
+                self._notify(on_stage, result.stages[-1])
+                raise CommandTimeout(
+                    f"{name} (seq {seq}): no answer from the device after {result.retries} "
+                    f"retries of {accept_timeout} s - is the link up?")
+            self._notify(on_stage, result.stages[-1])
+            if not p.finished.wait(cmd.timeout_s):
+                result.stages.append(StageRecord("TIMEOUT", "NOT_COMPLETED", time.time()))
+                self._notify(on_stage, result.stages[-1])
+                raise CommandTimeout(f"{name} (seq {seq}): accepted but not completed "
+                                     f"within {cmd.timeout_s} s")
+            if p.error is not None:
+                raise p.error
+            last = result.stages[-1]
+            self._notify(on_stage, last)
+            if last.stage == "REJECTED":
+                raise self._rejection(cmd.name, seq, last.reason, p.reply_bytes)
+            if last.stage == "FAILED":
+                raise CommandFailed(f"{name} (seq {seq}) failed on the device: {last.reason}",
+                                    last.reason)
+            if cmd.reply:
+                result.reply = decode_items(cmd.reply, p.reply_bytes, f"{name} reply")
+            return result
+        finally:
+            with self._lock:
+                self._pending.pop(seq, None)
+
+    def _rejection(self, name: str, seq: int, reason: str, data: bytes) -> CommandRejected:
+        if reason == "DICTIONARY_MISMATCH" and name == "CONNECT":
+            dev = {}
+            try:
+                dev = decode_items(self.dictionary.command("CONNECT").reply, data, "CONNECT reply")
+            except GroundStationError:
+                pass
+            return DictionaryMismatchError(
+                f"protocol dictionary mismatch: ground station speaks protocol "
+                f"{self.dictionary.version} (dictionary hash {self.dictionary.hash:08x}), the "
+                f"firmware speaks {dev.get('protocol_major', '?')}.{dev.get('protocol_minor', '?')} "
+                f"(hash {dev.get('dictionary_hash', 0):08x}) - use the protocol/*.toml the "
+                f"firmware was built with", reason, data)
+        return CommandRejected(f"{name} (seq {seq}) rejected by the device: {reason}", reason, data)
+
+    @staticmethod
+    def _notify(cb, stage: StageRecord) -> None:
+        if cb is not None:
+            cb(stage)
+
+    # ------------------------------------------------------------------ session
+    def connect(self, take_over: bool = False) -> CommandResult:
+        """Open a session: version/dictionary check, token, telemetry port, heartbeat."""
+        self.start()
+        result = self.command(
+            "CONNECT", protocol_major=self.dictionary.version_major,
+            protocol_minor=self.dictionary.version_minor,
+            dictionary_hash=self.dictionary.hash,
+            telemetry_port=self.telemetry.port if self.telemetry is not None else 0,
+            take_over=int(take_over))
+        self.session_token = int(result.reply["session_token"])
+        self.device_info = dict(result.reply)
+        if self._heartbeat_enabled:
+            self._session_stop.clear()
+            self._heartbeat_thread = threading.Thread(target=self._heartbeat, name="gs-heartbeat",
+                                                      daemon=True)
+            self._heartbeat_thread.start()
+        return result
+
+    def _heartbeat(self) -> None:
+        period = float(self.dictionary.command_defaults["heartbeat_period_s"])
+        while not self._session_stop.wait(period):
+            try:
+                self.command("HEARTBEAT")
+                self.heartbeat_failures = 0
+            except NotConnectedError:
+                return
+            except GroundStationError as exc:
+                self.heartbeat_failures += 1
+                log.warning("heartbeat failed (%d in a row): %s", self.heartbeat_failures, exc)
+                if self.link_state != "up":
+                    return
+
+    def disconnect(self) -> None:
+        """End the session cleanly (the device disarms)."""
+        self._session_stop.set()
+        if self._heartbeat_thread is not None:
+            self._heartbeat_thread.join(timeout=2.0)
+            self._heartbeat_thread = None
+        if self.session_token is not None and self.link_state == "up":
+            try:
+                self.command("DISCONNECT")
+            finally:
+                self.session_token = None
+        self.session_token = None
+
+    def abort(self) -> CommandResult:
+        """ABORT: accepted from anyone, in every state."""
+        return self.command("ABORT")
+
+    def close(self) -> None:
+        """Disconnect if needed and stop all threads; safe to call twice."""
+        try:
+            if self.session_token is not None and self.link_state == "up":
+                self.disconnect()
+        except GroundStationError as exc:
+            log.warning("disconnect on close failed: %s", exc)
+        self._session_stop.set()
+        self._stop.set()
+        self.command_link.close()
+        if self.telemetry is not None:
+            self.telemetry.close()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        self._threads.clear()
+        if self.link_state != "lost":
+            self._set_state("closed", "")
+
+    def __enter__(self) -> "DeviceClient":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,202 @@
+"""Byte transports: TCP and serial streams, UDP datagrams.
+
+Each transport turns OS-level failures into a specific LinkError with a message that
+names the endpoint and says what to check.  Public read()/write() count bytes and call
+the backend's _read()/_write(), so byte accounting and logging live in one place.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import socket
+import time
+
+import serial
+
+from ..errors import LinkError, LinkLostError, PortInUseError
+
+log = logging.getLogger(__name__)
+
+UDP_RECEIVE_BUFFER = 8 * 1024 * 1024   # ~4 s of HIGH_RATE at 1200 Hz: rides out GC pauses
+
+
+class StreamTransport:
+    """A bidirectional byte stream (template: subclasses implement _read/_write/_close)."""
+
+    name = "stream"
+
+    def __init__(self) -> None:
+        self.bytes_read = 0
+        self.bytes_written = 0
+        self.closed = False
+
+    def write(self, data: bytes) -> None:
+        if self.closed:
+            raise LinkLostError(f"{self.name}: write on a closed link")
+        self._write(data)
+        self.bytes_written += len(data)
+
+    def read(self, timeout: float) -> bytes:
+        """Bytes available within `timeout` s (b'' if none); LinkLostError if the peer went away."""
+        if self.closed:
+            raise LinkLostError(f"{self.name}: read on a closed link")
+        data = self._read(timeout)
+        self.bytes_read += len(data)
+        return data
+
+    def close(self) -> None:
+        if not self.closed:
+            self.closed = True
+            self._close()
+
+    def _write(self, data: bytes) -> None:
+        raise NotImplementedError
+
+    def _read(self, timeout: float) -> bytes:
+        raise NotImplementedError
+
+    def _close(self) -> None:
+        raise NotImplementedError
+
+
+class TcpStream(StreamTransport):
+    """TCP client connection to the device's command port."""
+
+    def __init__(self, host: str, port: int, connect_timeout: float = 3.0,
+                 sock: socket.socket | None = None):
+        super().__init__()
+        self.name = f"tcp://{host}:{port}"
+        if sock is None:
+            try:
+                sock = socket.create_connection((host, port), timeout=connect_timeout)
+            except ConnectionRefusedError:
+                raise LinkError(f"{self.name}: connection refused - is the controller (or "
+                                f"`groundstation sim`) running and listening on port {port}?") from None
+            except socket.timeout:
+                raise LinkError(f"{self.name}: no answer within {connect_timeout} s - check "
+                                f"the address, cable and firewall") from None
+            except OSError as exc:
+                raise LinkError(f"{self.name}: cannot connect ({exc.strerror or exc})") from None
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+        self._sock = sock
+
+    def _write(self, data: bytes) -> None:
+        try:
+            self._sock.sendall(data)
+        except OSError as exc:
+            raise LinkLostError(f"{self.name}: link lost while sending ({exc.strerror or exc})") from None
+
+    def _read(self, timeout: float) -> bytes:
+        try:
+            self._sock.settimeout(timeout)
+            data = self._sock.recv(65536)
+        except socket.timeout:
+            return b""
+        except OSError as exc:
+            raise LinkLostError(f"{self.name}: link lost ({exc.strerror or exc})") from None
+        if not data:
+            raise LinkLostError(f"{self.name}: the device closed the connection")
+        return data
+
+    def _close(self) -> None:
+        try:
+            self._sock.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+        self._sock.close()
+
+
+class SerialStream(StreamTransport):
+    """A serial port (or any pyserial URL: loop://, socket://host:port, spy://...)."""
+
+    def __init__(self, port: str, baudrate: int = 921600, port_factory=None):
+        super().__init__()
+        self.name = f"serial:{port}@{baudrate}"
+        try:
+            if port_factory is not None:
+                self._ser = port_factory()
+            else:
+                self._ser = serial.serial_for_url(port, baudrate=baudrate, timeout=0.1,
+                                                  write_timeout=1.0)
+        except serial.SerialException as exc:
+            raise LinkError(f"{self.name}: cannot open ({exc}) - is the adapter plugged in "
+                            f"and do you have permission (group 'dialout')?") from None
+
+    def _write(self, data: bytes) -> None:
+        try:
+            self._ser.write(data)
+        except (serial.SerialException, OSError) as exc:
+            raise LinkLostError(f"{self.name}: serial device vanished while sending ({exc})") from None
+
+    def _read(self, timeout: float) -> bytes:
+        try:
+            self._ser.timeout = timeout
+            first = self._ser.read(1)
+            if not first:
+                return b""
+            waiting = self._ser.in_waiting
+            return first + (self._ser.read(waiting) if waiting else b"")
+        except (serial.SerialException, OSError, TypeError) as exc:
+            # pyserial raises TypeError from inside read() when the fd is gone
+            raise LinkLostError(f"{self.name}: serial device vanished ({exc})") from None
+
+    def _close(self) -> None:
+        try:
+            self._ser.close()
+        except (serial.SerialException, OSError):
+            pass
+
+
+class UdpReceiver:
+    """Bound UDP socket for telemetry datagrams, with an enlarged receive buffer."""
+
+    def __init__(self, host: str = "127.0.0.1", port: int = 0,
+                 buffer_bytes: int = UDP_RECEIVE_BUFFER):
+        self._sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, buffer_bytes)
+        try:
+            self._sock.bind((host, port))
+        except OSError as exc:
+            self._sock.close()
+            if exc.errno == errno.EADDRINUSE:
+                raise PortInUseError(f"UDP port {port} on {host} is already in use by another "
+                                     f"program - choose another telemetry port or stop it") from None
+            raise LinkError(f"cannot listen for telemetry on udp://{host}:{port} "
+                            f"({exc.strerror or exc})") from None
+        self.host, self.port = self._sock.getsockname()
+        self.receive_buffer = self._sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        self.datagrams = 0
+        self.bytes_read = 0
+        self.closed = False
+
+    def receive(self, timeout: float, max_datagrams: int = 512) -> tuple[list[bytes], list[float]]:
+        """Wait up to `timeout` s for one datagram, then drain what else is queued."""
+        out: list[bytes] = []
+        times: list[float] = []
+        try:
+            self._sock.settimeout(timeout)
+            data = self._sock.recv(65536)
+        except socket.timeout:
+            return out, times
+        except OSError as exc:
+            if self.closed:
+                return out, times
+            raise LinkLostError(f"udp://{self.host}:{self.port}: receive failed ({exc})") from None
+        out.append(data)
+        times.append(time.time())
+        self._sock.setblocking(False)
+        try:
+            while len(out) < max_datagrams:
+                data = self._sock.recv(65536)
+                out.append(data)
+                times.append(time.time())
+        except (BlockingIOError, OSError):
+            pass
+        self.datagrams += len(out)
+        self.bytes_read += sum(len(d) for d in out)
+        return out, times
+
+    def close(self) -> None:
+        self.closed = True
+        self._sock.close()

@@ -1,0 +1,1 @@
+"""Parameter tables: schema from protocol/parameters.toml, packing, validation."""

@@ -1,0 +1,81 @@
+"""The controller's parameter table as bytes (SPEC.md, "Parameter upload").
+
+Entries of protocol/parameters.toml in id order, each packed big-endian with its type
+and shape, no padding.  Both sides use this module: the host to build and verify a
+table, the simulated device to validate and activate one.
+"""
+
+from __future__ import annotations
+
+import zlib
+from typing import Any, Mapping
+
+import numpy as np
+
+from ..dictionary import Dictionary, ParameterDef
+from ..errors import GroundStationError
+
+
+class ParameterError(GroundStationError):
+    """A parameter value is missing, unknown, non-finite or out of range."""
+
+
+def table_dtype(dictionary: Dictionary) -> np.dtype:
+    return np.dtype([(p.name, p.dtype, p.shape) for p in dictionary.parameters])
+
+
+def table_size(dictionary: Dictionary) -> int:
+    return table_dtype(dictionary).itemsize
+
+
+def default_values(dictionary: Dictionary) -> dict[str, Any]:
+    return {p.name: p.default for p in dictionary.parameters}
+
+
+def problems(dictionary: Dictionary, values: Mapping[str, Any]) -> list[str]:
+    """Every reason the table would be refused (empty list: acceptable)."""
+    out = []
+    names = {p.name for p in dictionary.parameters}
+    for extra in sorted(set(values) - names):
+        out.append(f"unknown parameter '{extra}'")
+    for p in dictionary.parameters:
+        if p.name not in values:
+            out.append(f"'{p.name}' has no value")
+            continue
+        v = np.asarray(values[p.name], dtype=np.float64)
+        if v.shape != p.shape:
+            out.append(f"'{p.name}' has shape {v.shape}, expected {p.shape}")
+            continue
+        if not np.all(np.isfinite(v)):
+            out.append(f"'{p.name}' is not finite")
+        elif np.any(v < p.value_range[0]) or np.any(v > p.value_range[1]):
+            out.append(f"'{p.name}' = {values[p.name]!r} {p.units} outside "
+                       f"[{p.value_range[0]}, {p.value_range[1]}]")
+    return out
+
+
+def pack(dictionary: Dictionary, values: Mapping[str, Any]) -> bytes:
+    bad = problems(dictionary, values)
+    if bad:
+        raise ParameterError("parameter table refused: " + "; ".join(bad))
+    rec = np.zeros(1, table_dtype(dictionary))
+    for p in dictionary.parameters:
+        rec[p.name] = values[p.name]
+    return rec.tobytes()
+
+
+def unpack(dictionary: Dictionary, blob: bytes) -> dict[str, Any]:
+    dt = table_dtype(dictionary)
+    if len(blob) != dt.itemsize:
+        raise ParameterError(f"parameter table of {len(blob)} bytes, this dictionary's table "
+                             f"has {dt.itemsize}")
+    rec = np.frombuffer(blob, dt)[0]
+    return {p.name: _pyvalue(p, rec[p.name]) for p in dictionary.parameters}
+
+
+def _pyvalue(p: ParameterDef, v):
+    return v.tolist() if p.shape else v.item()
+
+
+def table_crc(blob: bytes) -> int:
+    return zlib.crc32(blob)

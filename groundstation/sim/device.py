@@ -1,0 +1,282 @@
+"""The simulated device's protocol endpoint: TCP command server, UDP telemetry sender,
+optional serial stream, and the 1200 Hz tick loop (paced to the wall clock, as fast as
+possible, or stepped by hand from a test).
+
+Binds to 127.0.0.1 unless told otherwise.  All firmware access is under one lock, so a
+command is executed between two control periods, never in the middle of one.
+"""
+
+from __future__ import annotations
+
+import errno
+import itertools
+import logging
+import socket
+import threading
+import time
+from typing import Any, Callable
+
+from ..codec import FrameCodec, StreamDeframer
+from ..dictionary import Dictionary, load_dictionary
+from ..errors import LinkError, LinkLostError, PortInUseError
+from ..link.transports import StreamTransport, TcpStream
+from .firmware import Firmware
+
+log = logging.getLogger(__name__)
+
+HOUSEKEEPING_DIVIDER = 120          # 1200 Hz / 120 = 10 Hz
+
+
+class _Connection:
+    def __init__(self, conn_id: int, transport: StreamTransport, peer_ip: str | None):
+        self.id = conn_id
+        self.transport = transport
+        self.peer_ip = peer_ip
+        self.lock = threading.Lock()
+        self.thread: threading.Thread | None = None
+
+    def send(self, data: bytes) -> None:
+        with self.lock:
+            self.transport.write(data)
+
+
+class SimulatedDevice:
+    """A testbed controller on loopback (or a serial stream) speaking the real protocol."""
+
+    def __init__(self, dictionary: Dictionary | None = None, *, host: str = "127.0.0.1",
+                 tcp_port: int = 0, pacing: str = "realtime", seed: int = 0,
+                 frames_per_datagram: int = 1, firmware: Firmware | None = None):
+        if pacing not in ("realtime", "fast", "manual"):
+            raise ValueError(f"pacing must be realtime, fast or manual, not {pacing!r}")
+        self.dictionary = dictionary or load_dictionary()
+        self.codec = FrameCodec(self.dictionary)
+        self.firmware = firmware or Firmware(self.dictionary, seed=seed)
+        self.host = host
+        self.pacing = pacing
+        self.frames_per_datagram = max(1, frames_per_datagram)
+        self._requested_port = tcp_port
+        self._lock = threading.RLock()
+        self._stop = threading.Event()
+        self._connections: dict[int, _Connection] = {}
+        self._ids = itertools.count(1)
+        self._seq = {p.name: 0 for p in self.dictionary.packets}
+        self._listener: socket.socket | None = None
+        self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._threads: list[threading.Thread] = []
+        #: test hook: called with each telemetry datagram; return None to drop it
+        self.datagram_filter: Callable[[bytes], bytes | None] | None = None
+        self.tcp_port: int | None = None
+        self._t0: float | None = None
+        self._ticks_done = 0
+        self.datagrams_sent = 0
+
+    # ------------------------------------------------------------------ lifecycle
+    def start(self) -> "SimulatedDevice":
+        lst = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+        lst.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            lst.bind((self.host, self._requested_port))
+        except OSError as exc:
+            lst.close()
+            if exc.errno == errno.EADDRINUSE:
+                raise PortInUseError(f"TCP port {self._requested_port} on {self.host} is already "
+                                     f"in use - another simulator running? choose --tcp-port") from None
+            raise LinkError(f"cannot listen on {self.host}:{self._requested_port} ({exc.strerror})") from None
+        lst.listen(4)
+        lst.settimeout(0.1)
+        self._listener = lst
+        self.tcp_port = lst.getsockname()[1]
+        self._spawn(self._accept_loop, "sim-accept")
+        if self.pacing != "manual":
+            self._spawn(self._tick_loop, "sim-ticks")
+        log.info("simulated device listening on tcp://%s:%d", self.host, self.tcp_port)
+        return self
+
+    def _spawn(self, target, name) -> threading.Thread:
+        t = threading.Thread(target=target, name=name, daemon=True)
+        self._threads.append(t)
+        t.start()
+        return t
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._listener is not None:
+            self._listener.close()
+        for conn in list(self._connections.values()):
+            conn.transport.close()
+        for t in self._threads:
+            t.join(timeout=2.0)
+        self._udp.close()
+
+    def __enter__(self) -> "SimulatedDevice":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
+
+    # ------------------------------------------------------------------ connections
+    def _accept_loop(self) -> None:
+        assert self._listener is not None
+        while not self._stop.is_set():
+            try:
+                sock, addr = self._listener.accept()
+            except socket.timeout:
+                continue
+            except OSError:
+                return
+            self.attach_stream(TcpStream(addr[0], addr[1], sock=sock), peer_ip=addr[0])
+
+    def attach_stream(self, transport: StreamTransport, peer_ip: str | None = None) -> int:
+        """Serve commands (and telemetry, if the host asks for it there) on a stream."""
+        conn = _Connection(next(self._ids), transport, peer_ip)
+        with self._lock:
+            self._connections[conn.id] = conn
+        conn.thread = self._spawn(lambda: self._serve(conn), f"sim-conn-{conn.id}")
+        return conn.id
+
+    def _serve(self, conn: _Connection) -> None:
+        deframer = StreamDeframer(self.codec)
+        try:
+            while not self._stop.is_set():
+                data = conn.transport.read(0.1)
+                if not data:
+                    continue
+                for block in deframer.feed(data, time.time()):
+                    if block.name == "COMMAND":
+                        self._on_commands(conn, block)
+        except LinkLostError as exc:
+            log.info("connection %d closed: %s", conn.id, exc)
+        finally:
+            with self._lock:
+                self._connections.pop(conn.id, None)
+                if self.firmware.session_peer == conn.id:
+                    self.firmware.end_session("command connection closed")
+            conn.transport.close()
+
+    def _on_commands(self, conn: _Connection, block) -> None:
+        out = []
+        with self._lock:
+            if self.pacing == "realtime" and self._t0 is not None:
+                self._catch_up()          # execute at the control-cycle boundary of "now"
+            for i in range(len(block)):
+                seq = int(block["sequence"][i])
+                token = int(block["session_token"][i])
+                opcode = int(block["opcode"][i])
+                stages = self.firmware.handle_command(seq, token, opcode, block["arguments"][i],
+                                                      peer=conn.id)
+                for st in stages:
+                    out.append(self._frame("RESPONSE", {
+                        "command_sequence": seq, "opcode": opcode, "stage": st.stage,
+                        "reason": st.reason, "data": st.data}))
+            self._flush_events()
+        try:
+            conn.send(b"".join(out))
+        except LinkLostError:
+            pass
+
+    def _frame(self, packet: str, values: dict[str, Any]) -> bytes:
+        seq = self._seq[packet]
+        self._seq[packet] = (seq + 1) & 0xFFFFFFFF
+        return self.codec.encode_variable(packet, values, seq, self.firmware.tick)
+
+    # ------------------------------------------------------------------ telemetry
+    def _telemetry_target(self) -> tuple[Any, ...] | None:
+        fw = self.firmware
+        if fw.session_token is None:
+            return None
+        conn = self._connections.get(fw.session_peer)
+        if conn is None:
+            return None
+        port = getattr(fw, "telemetry_port", 0)
+        if port and conn.peer_ip:
+            return ("udp", (conn.peer_ip, port))
+        return ("stream", conn)
+
+    def _send_telemetry(self, frames: list[bytes], frame_groups: bool) -> None:
+        target = self._telemetry_target()
+        if target is None or not frames:
+            return
+        if target[0] == "stream":
+            try:
+                target[1].send(b"".join(frames))
+            except LinkLostError:
+                pass
+            return
+        step = self.frames_per_datagram if frame_groups else 1
+        for i in range(0, len(frames), step):
+            datagram = b"".join(frames[i:i + step])
+            if self.datagram_filter is not None:
+                datagram = self.datagram_filter(datagram)
+                if datagram is None:
+                    continue
+            try:
+                self._udp.sendto(datagram, target[1])
+                self.datagrams_sent += 1
+            except OSError as exc:       # host gone or buffer full: a real rig drops too
+                self.firmware.overruns += 1
+                log.debug("telemetry send failed: %s", exc)
+
+    def _flush_events(self) -> None:
+        fw = self.firmware
+        frames = []
+        while fw.events:
+            level, code, text = fw.events.popleft()
+            frames.append(self._frame("EVENT", {"level": level, "code": code, "text": text[:900]}))
+        self._send_telemetry(frames, frame_groups=False)
+
+    def run_ticks(self, n: int) -> None:
+        """Advance the device by n control periods and send their telemetry."""
+        if n <= 0:
+            return
+        hr = self.dictionary.packet("HIGH_RATE")
+        with self._lock:
+            rows = []
+            hk_frames = []
+            for _ in range(n):
+                rows.append(self.firmware.step())
+                if self.firmware.tick % HOUSEKEEPING_DIVIDER == 0:
+                    hk_frames.append(self.codec.encode(
+                        "HOUSEKEEPING", self.firmware.housekeeping(),
+                        [self._next_seq("HOUSEKEEPING")], [self.firmware.tick]))
+            if self._telemetry_target() is None:
+                self._flush_events()
+                return
+            cols = {k: [r[k] for r in rows] for k in rows[0]}
+            first = self._seq["HIGH_RATE"]
+            self._seq["HIGH_RATE"] = (first + n) & 0xFFFFFFFF
+            ticks = [self.firmware.tick - n + 1 + i for i in range(n)]
+            data = self.codec.encode(hr, cols, [first + i for i in range(n)], ticks)
+            size = len(data) // n
+            frames = [data[i * size:(i + 1) * size] for i in range(n)]
+            self._send_telemetry(frames, frame_groups=True)
+            self._send_telemetry(hk_frames, frame_groups=False)
+            self._flush_events()
+
+    def _next_seq(self, packet: str) -> int:
+        seq = self._seq[packet]
+        self._seq[packet] = (seq + 1) & 0xFFFFFFFF
+        return seq
+
+    def _catch_up(self) -> None:
+        """Realtime pacing: run the control periods that are due by the wall clock."""
+        rate = self.dictionary.control_rate_hz
+        with self._lock:
+            due = int((time.monotonic() - self._t0) * rate) - self._ticks_done
+            max_batch = int(rate // 2)
+            if due > max_batch:          # we fell behind (machine busy): skip, and say so
+                self.firmware.overruns += due - max_batch
+                self._ticks_done += due - max_batch
+                due = max_batch
+            if due > 0:
+                self.run_ticks(due)
+                self._ticks_done += due
+
+    def _tick_loop(self) -> None:
+        self._t0 = time.monotonic()
+        self._ticks_done = 0
+        while not self._stop.is_set():
+            if self.pacing == "fast":
+                self.run_ticks(120)
+                continue
+            self._catch_up()
+            time.sleep(0.001)

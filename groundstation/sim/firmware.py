@@ -1,0 +1,427 @@
+"""What the embedded controller does, apart from physics: session, command checks and
+execution, modes and arming, watchdog, parameter table, profiles, telemetry values.
+
+No sockets and no wall clock here: time is the device tick, advanced by `step()`, so a
+test can drive it deterministically.  `handle_command()` returns the RESPONSE stages to
+send; the network endpoint (device.py) does the I/O.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import random
+import zlib
+from collections import OrderedDict, deque
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..codec.frames import decode_items, encode_items
+from ..dictionary import CommandDef, Dictionary
+from ..errors import GroundStationError
+from ..params import table as ptable
+from .plant import RigidPlant
+
+log = logging.getLogger(__name__)
+
+FIRMWARE_VERSION = (0 << 16) | (1 << 8) | 0
+DEDUP_WINDOW = 64
+
+ACCEPTED, REJECTED, COMPLETED, FAILED = 1, 2, 3, 4
+
+
+@dataclass
+class Stage:
+    stage: int
+    reason: int = 0
+    data: bytes = b""
+
+
+@dataclass
+class _Staging:
+    kind: str
+    buffer: bytearray
+    meta: dict[str, Any] = field(default_factory=dict)
+
+
+class Firmware:
+    """Device-side state machine of the testbed controller."""
+
+    def __init__(self, dictionary: Dictionary, *, seed: int = 0, description: str = "",
+                 plant: RigidPlant | None = None):
+        self.d = dictionary
+        self.rate = dictionary.control_rate_hz
+        self.modes = dictionary.command("SET_MODE").args[0].states
+        self.err = dictionary.error_codes
+        self.faults = dictionary.packet("HOUSEKEEPING").item_by_name["fault_code"].states
+        self.ev = dictionary.event_codes
+        self.description = description or "simulated testbed (trivial rigid plant)"
+        self.plant = plant or RigidPlant(seed=seed)
+        self._token_rng = random.Random(seed ^ 0x5EED)
+        self.tick = 0
+        self.mode = 0
+        self.armed = False
+        self.fault = 0
+        self.friction_comp = False
+        self.session_token: int | None = None
+        self.session_peer: Any = None
+        self.last_heard_tick = 0
+        self.watchdog_expired = False
+        self.current_cmd = (0.0, 0.0)
+        self.reference = 0.0
+        self.params = ptable.default_values(dictionary)
+        self.param_blob = ptable.pack(dictionary, self.params)
+        self.param_crc = ptable.table_crc(self.param_blob)
+        self.param_version = 0
+        self._staging: dict[str, _Staging] = {}
+        self.profile: dict[str, Any] | None = None
+        self.profile_pos = 0
+        self.profile_active = False
+        self.accepted = 0
+        self.rejected = 0
+        self.overruns = 0
+        self.events: deque[tuple[int, int, str]] = deque(maxlen=256)
+        self._done: OrderedDict[tuple[int, int], list[Stage]] = OrderedDict()
+        self._last_u = (0.0, 0.0)
+        self._emit("INFO", "BOOT", f"firmware {self.version_string} booted")
+
+    # ------------------------------------------------------------------ helpers
+    @property
+    def version_string(self) -> str:
+        v = FIRMWARE_VERSION
+        return f"{v >> 16}.{(v >> 8) & 0xFF}.{v & 0xFF}"
+
+    def _emit(self, level: str, code: str, text: str) -> None:
+        levels = self.d.packet("EVENT").item_by_name["level"].states
+        self.events.append((levels[level], self.ev[code], text))
+
+    def _reason(self, name: str) -> int:
+        return self.err[name]
+
+    def _connect_reply(self, token: int) -> bytes:
+        return encode_items(self.d.command("CONNECT").reply, {
+            "session_token": token, "protocol_major": self.d.version_major,
+            "protocol_minor": self.d.version_minor, "dictionary_hash": self.d.hash,
+            "tick": self.tick & 0xFFFFFFFF}, "CONNECT reply")
+
+    # ------------------------------------------------------------------ commands
+    def handle_command(self, sequence: int, token: int, opcode: int, args: bytes,
+                       peer: Any = None) -> list[Stage]:
+        """Check and execute one COMMAND; returns the RESPONSE stages to send."""
+        key = (sequence, opcode)
+        if key in self._done:                 # a retry: answer again, never execute twice
+            return self._done[key]
+        try:
+            stages = self._execute(sequence, token, opcode, args, peer)
+        except Exception:  # a firmware bug must answer, not kill the device
+            log.exception("command %04x failed inside the simulated firmware", opcode)
+            stages = [Stage(ACCEPTED), Stage(FAILED, self._reason("INTERNAL_ERROR"))]
+        if stages[0].stage == ACCEPTED:
+            self.accepted += 1
+        else:
+            self.rejected += 1
+        self._done[key] = stages
+        while len(self._done) > DEDUP_WINDOW:
+            self._done.popitem(last=False)
+        return stages
+
+    def _execute(self, sequence, token, opcode, args, peer) -> list[Stage]:
+        try:
+            cmd = self.d.command(opcode)
+        except GroundStationError:
+            return [Stage(REJECTED, self._reason("UNKNOWN_COMMAND"))]
+        try:
+            values = decode_items(cmd.args, args, cmd.name)
+        except GroundStationError:
+            return [Stage(REJECTED, self._reason("BAD_LENGTH"))]
+        if cmd.needs_session and (self.session_token is None or token != self.session_token):
+            self._emit("WARNING", "COMMAND_REJECTED", f"{cmd.name} without the session token")
+            return [Stage(REJECTED, self._reason("NOT_SESSION_OWNER"))]
+        bad = self._range_problem(cmd, values)
+        if bad:
+            return [Stage(REJECTED, self._reason("OUT_OF_RANGE"))]
+        if cmd.needs_session:
+            self.last_heard_tick = self.tick
+        handler = getattr(self, f"_cmd_{cmd.name.lower()}")
+        return handler(values, peer)
+
+    @staticmethod
+    def _range_problem(cmd: CommandDef, values: dict[str, Any]) -> str | None:
+        for item in cmd.args:
+            v = values.get(item.name)
+            if isinstance(v, (bytes, str)):
+                continue
+            if isinstance(v, float) and not math.isfinite(v):
+                return item.name
+            if item.value_range and not item.value_range[0] <= v <= item.value_range[1]:
+                return item.name
+            if item.states and v not in item.states.values():
+                return item.name
+        return None
+
+    def _ok(self, data: bytes = b"") -> list[Stage]:
+        return [Stage(ACCEPTED), Stage(COMPLETED, 0, data)]
+
+    def _reject(self, reason: str) -> list[Stage]:
+        return [Stage(REJECTED, self._reason(reason))]
+
+    def _cmd_connect(self, v, peer):
+        if v["protocol_major"] != self.d.version_major or v["dictionary_hash"] != self.d.hash:
+            return [Stage(REJECTED, self._reason("DICTIONARY_MISMATCH"), self._connect_reply(0))]
+        if self.session_token is not None and not v["take_over"] and peer != self.session_peer:
+            return self._reject("SESSION_BUSY")
+        if self.session_token is not None:
+            self._emit("WARNING", "SESSION_TAKEN_OVER", "session taken over by another host")
+            self._safe_state()
+        self.session_token = self._token_rng.randrange(1, 1 << 32)
+        self.session_peer = peer
+        self.telemetry_port = v["telemetry_port"]
+        self.last_heard_tick = self.tick
+        self.watchdog_expired = False
+        self._emit("INFO", "SESSION_OPENED", f"session opened by {peer}")
+        return self._ok(self._connect_reply(self.session_token))
+
+    def end_session(self, why: str) -> None:
+        """The session owner disconnected or its connection closed."""
+        if self.session_token is None:
+            return
+        if self.armed:
+            self._safe_state()
+        self.session_token = None
+        self.session_peer = None
+        self._emit("INFO", "SESSION_CLOSED", why)
+
+    def _cmd_disconnect(self, v, peer):
+        self.end_session("session closed by the host")
+        return self._ok()
+
+    def _cmd_heartbeat(self, v, peer):
+        return self._ok(encode_items(self.d.command("HEARTBEAT").reply,
+                                     {"tick": self.tick & 0xFFFFFFFF}, "HEARTBEAT reply"))
+
+    def _cmd_get_info(self, v, peer):
+        return self._ok(encode_items(self.d.command("GET_INFO").reply, {
+            "firmware_version": FIRMWARE_VERSION, "protocol_major": self.d.version_major,
+            "protocol_minor": self.d.version_minor, "dictionary_hash": self.d.hash,
+            "tick": self.tick & 0xFFFFFFFF, "description": self.description}, "GET_INFO reply"))
+
+    def _cmd_set_mode(self, v, peer):
+        target = v["mode"]
+        if target == self.modes["IDLE"]:
+            self._safe_state()
+        elif self.armed:
+            return self._reject("INVALID_STATE")
+        if target != self.mode:
+            self.mode = target
+            name = {val: k for k, val in self.modes.items()}[target]
+            self._emit("INFO", "MODE_CHANGED", f"mode {name}")
+        return self._ok()
+
+    def _cmd_arm(self, v, peer):
+        if self.fault:
+            return self._reject("FAULT_LATCHED")
+        if self.mode == self.modes["IDLE"]:
+            return self._reject("INVALID_STATE")
+        if not self.armed:
+            self.armed = True
+            self.current_cmd = (0.0, 0.0)
+            self.reference = self.plant.angle
+            self._emit("INFO", "ARMED", "drives enabled")
+        return self._ok()
+
+    def _cmd_disarm(self, v, peer):
+        self._safe_state(keep_mode=True)
+        self.fault = 0                       # DISARM acknowledges a latched fault
+        self.watchdog_expired = False
+        return self._ok()
+
+    def _cmd_abort(self, v, peer):
+        self._safe_state()
+        self._emit("WARNING", "ABORTED", f"abort from {peer}")
+        return self._ok()
+
+    def _cmd_friction_comp(self, v, peer):
+        self.friction_comp = bool(v["enable"])
+        return self._ok()
+
+    def _cmd_set_currents(self, v, peer):
+        if self.mode != self.modes["OPEN_LOOP"]:
+            return self._reject("INVALID_STATE")
+        if not self.armed:
+            return self._reject("NOT_ARMED")
+        self.current_cmd = (v["current_coarse"], v["current_fine"])
+        return self._ok()
+
+    def _cmd_set_reference(self, v, peer):
+        if self.mode not in (self.modes["RELATIVE"], self.modes["INERTIAL"]):
+            return self._reject("INVALID_STATE")
+        self.reference = v["reference"]
+        return self._ok()
+
+    def _cmd_param_begin(self, v, peer):
+        if v["table_length"] != ptable.table_size(self.d):
+            return self._reject("OUT_OF_RANGE")
+        self._staging["param"] = _Staging("param", bytearray(v["table_length"]),
+                                          {"version": v["table_version"]})
+        return self._ok()
+
+    def _cmd_param_write(self, v, peer):
+        return self._write_block("param", v["offset"], v["data"])
+
+    def _write_block(self, kind: str, offset: int, data: bytes) -> list[Stage]:
+        st = self._staging.get(kind)
+        if st is None:
+            return self._reject("NOTHING_STAGED")
+        if offset + len(data) > len(st.buffer):
+            return self._reject("OUT_OF_RANGE")
+        st.buffer[offset:offset + len(data)] = data
+        return self._ok()
+
+    def _cmd_param_commit(self, v, peer):
+        st = self._staging.get("param")
+        if st is None:
+            return self._reject("NOTHING_STAGED")
+        if self.armed:
+            return self._reject("INVALID_STATE")
+        blob = bytes(st.buffer)
+        if zlib.crc32(blob) != v["table_crc"]:
+            return [Stage(ACCEPTED), Stage(FAILED, self._reason("CRC_MISMATCH"))]
+        values = ptable.unpack(self.d, blob)
+        if ptable.problems(self.d, values):
+            return [Stage(ACCEPTED), Stage(FAILED, self._reason("VALIDATION_FAILED"))]
+        # activation happens here, between two step() calls: a control-cycle boundary
+        self.params, self.param_blob = values, blob
+        self.param_crc, self.param_version = zlib.crc32(blob), st.meta["version"]
+        del self._staging["param"]
+        self._emit("INFO", "PARAMETERS_ACTIVATED",
+                   f"parameter table v{self.param_version} crc {self.param_crc:08x} active")
+        return self._ok(encode_items(self.d.command("PARAM_COMMIT").reply, {
+            "table_crc": self.param_crc, "tick": self.tick & 0xFFFFFFFF}, "PARAM_COMMIT reply"))
+
+    def _cmd_param_read(self, v, peer):
+        off, count = v["offset"], v["count"]
+        if off + count > len(self.param_blob):
+            return self._reject("OUT_OF_RANGE")
+        return self._ok(encode_items(self.d.command("PARAM_READ").reply, {
+            "offset": off, "data": self.param_blob[off:off + count]}, "PARAM_READ reply"))
+
+    def _cmd_profile_begin(self, v, peer):
+        if self.profile_active:
+            return self._reject("INVALID_STATE")
+        self._staging["profile"] = _Staging("profile", bytearray(4 * v["sample_count"]), dict(v))
+        return self._ok()
+
+    def _cmd_profile_write(self, v, peer):
+        return self._write_block("profile", 4 * v["offset"], v["samples"])
+
+    def _cmd_profile_commit(self, v, peer):
+        st = self._staging.get("profile")
+        if st is None:
+            return self._reject("NOTHING_STAGED")
+        if zlib.crc32(bytes(st.buffer)) != v["profile_crc"]:
+            return [Stage(ACCEPTED), Stage(FAILED, self._reason("CRC_MISMATCH"))]
+        samples = np.frombuffer(bytes(st.buffer), ">f4").astype(np.float64)
+        if not np.all(np.isfinite(samples)):
+            return [Stage(ACCEPTED), Stage(FAILED, self._reason("VALIDATION_FAILED"))]
+        self.profile = {"samples": samples, **st.meta}
+        del self._staging["profile"]
+        return self._ok()
+
+    def _cmd_profile_start(self, v, peer):
+        if self.profile is None:
+            return self._reject("NOTHING_STAGED")
+        if not self.armed:
+            return self._reject("NOT_ARMED")
+        self.profile_active, self.profile_pos = True, 0
+        self._emit("INFO", "PROFILE_STARTED", f"profile {self.profile['profile_id']} started")
+        return self._ok()
+
+    def _cmd_profile_stop(self, v, peer):
+        if self.profile_active:
+            self.profile_active = False
+            self._emit("INFO", "PROFILE_STOPPED", "profile stopped by the host")
+        return self._ok()
+
+    # ------------------------------------------------------------------ control cycle
+    def _safe_state(self, keep_mode: bool = False) -> None:
+        """Both motors to zero now (this control period), drives off, profile stopped."""
+        was_armed = self.armed
+        self.armed = False
+        self.current_cmd = (0.0, 0.0)
+        self.profile_active = False
+        if not keep_mode:
+            self.mode = self.modes["IDLE"]
+        if was_armed:
+            self._emit("INFO", "DISARMED", "drives disabled, motors at zero")
+
+    def step(self) -> dict[str, Any]:
+        """One control period: watchdog, controller, plant; returns HIGH_RATE values."""
+        self.tick += 1
+        timeout_ticks = self.params["watchdog_timeout"] * self.rate
+        if self.armed and self.session_token is not None and \
+                self.tick - self.last_heard_tick > timeout_ticks:
+            self._safe_state()
+            self.fault = self.faults["WATCHDOG"]
+            self.watchdog_expired = True
+            self._emit("CRITICAL", "WATCHDOG_EXPIRED",
+                       f"no heartbeat for {self.params['watchdog_timeout']} s: motors off")
+        i1, i2 = self._currents()
+        sat = (abs(i1) >= self.plant.i_max[0], abs(i2) >= self.plant.i_max[1])
+        meas = self.plant.step(i1, i2, 1.0 / self.rate)
+        if self.armed and abs(meas["encoder_outer"]) > self.params["travel_limit"]:
+            self._safe_state()
+            self.fault = self.faults["OVER_TRAVEL"]
+            self._emit("ERROR", "FAULT", "outer axis beyond the travel limit: motors off")
+        status = {"armed": self.armed, "coarse_saturated": sat[0], "fine_saturated": sat[1],
+                  "profile_active": self.profile_active,
+                  "friction_comp_on": self.friction_comp, "fault": self.fault != 0}
+        err = self.reference - meas["encoder_inner"] if self.mode in (
+            self.modes["RELATIVE"], self.modes["INERTIAL"]) else 0.0
+        return {"mode": self.mode, **status, **meas, "reference": self.reference,
+                "error_angle": err, "error_rate": 0.0,
+                "torque_coarse_cmd": i1 * self.plant.kt[0], "torque_fine_cmd": i2 * self.plant.kt[1],
+                "friction_comp_torque": 0.0,
+                "profile_index": self.profile_pos if self.profile_active else 0}
+
+    def _currents(self) -> tuple[float, float]:
+        if not self.armed:
+            return 0.0, 0.0
+        if self.profile_active and self.profile is not None:
+            samples = self.profile["samples"]
+            value = samples[self.profile_pos]
+            self.profile_pos += 1
+            if self.profile_pos >= len(samples):
+                self.profile_active = False
+                self._emit("INFO", "PROFILE_FINISHED", "profile finished")
+            target = self.profile["target"]
+            targets = self.d.command("PROFILE_BEGIN").args[1].states
+            if target == targets["CURRENT_COARSE"]:
+                self.current_cmd = (value, self.current_cmd[1])
+            elif target == targets["CURRENT_FINE"]:
+                self.current_cmd = (self.current_cmd[0], value)
+            else:
+                self.reference = value
+        if self.mode == self.modes["OPEN_LOOP"]:
+            return self.current_cmd
+        # Interim position loop (PD on the encoder) until uploaded controllers run here.
+        e = self.reference - self.plant.angle
+        u = 400.0 * e - 8.0 * self.plant.rate
+        i1 = max(-self.plant.i_max[0], min(self.plant.i_max[0], u / self.plant.kt[0]))
+        return i1, 0.0
+
+    def housekeeping(self) -> dict[str, Any]:
+        age_ms = (self.tick - self.last_heard_tick) * 1000.0 / self.rate
+        return {
+            "temp_motor_coarse": 25.0 + 0.5 * abs(self.current_cmd[0]),
+            "temp_motor_fine": 25.0, "temp_flexure": 27.0, "temp_electronics": 35.0,
+            "supply_motor": 28.0, "supply_logic": 5.0,
+            "firmware_version": FIRMWARE_VERSION, "uptime": int(self.tick / self.rate),
+            "param_table_crc": self.param_crc, "param_table_version": self.param_version,
+            "active_profile": self.profile["profile_id"] if self.profile else 0,
+            "watchdog": 2 if self.watchdog_expired else (0 if self.session_token else 1),
+            "heartbeat_age": min(65535, int(age_ms)) if self.session_token else 65535,
+            "commands_accepted": self.accepted, "commands_rejected": self.rejected,
+            "fault_code": self.fault, "telemetry_overruns": self.overruns,
+        }

@@ -1,0 +1,70 @@
+"""The simulated testbed as a child process (what `make run` and the GUI start).
+
+The child prints one line `LISTENING tcp://HOST:PORT` once its command port is open;
+the parent reads it (with a timeout) to learn the port, and terminates the child when
+done.  A separate process keeps the simulator's 1200 Hz loop off the ground station's
+interpreter lock, as a real rig would be.
+"""
+
+from __future__ import annotations
+
+import os
+import select
+import subprocess
+import sys
+import time
+
+from ..errors import LinkError
+
+ANNOUNCE = "LISTENING "
+
+
+class SimulatorProcess:
+    def __init__(self, *, host: str = "127.0.0.1", tcp_port: int = 0, pacing: str = "realtime",
+                 seed: int = 0, start_timeout: float = 20.0):
+        self.args = [sys.executable, "-m", "groundstation", "sim", "--host", host,
+                     "--tcp-port", str(tcp_port), "--pacing", pacing, "--seed", str(seed),
+                     "--announce"]
+        self.start_timeout = start_timeout
+        self.proc: subprocess.Popen | None = None
+        self.address: str = ""
+
+    def start(self) -> str:
+        self.proc = subprocess.Popen(self.args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                     text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+        deadline = time.monotonic() + self.start_timeout
+        assert self.proc.stdout is not None
+        while time.monotonic() < deadline:
+            ready, _, _ = select.select([self.proc.stdout], [], [], 0.1)
+            if ready:
+                line = self.proc.stdout.readline()
+                if line.startswith(ANNOUNCE):
+                    self.address = line[len(ANNOUNCE):].strip()
+                    return self.address
+                if not line and self.proc.poll() is not None:
+                    break
+        err = self.proc.stderr.read() if self.proc.poll() is not None and self.proc.stderr else ""
+        self.stop()
+        raise LinkError(f"the simulated testbed did not start within {self.start_timeout} s"
+                        + (f": {err.strip().splitlines()[-1]}" if err.strip() else ""))
+
+    def stop(self) -> None:
+        if self.proc is None:
+            return
+        if self.proc.poll() is None:
+            self.proc.terminate()
+            try:
+                self.proc.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        for f in (self.proc.stdout, self.proc.stderr):
+            if f is not None:
+                f.close()
+        self.proc = None
+
+    def __enter__(self) -> str:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
