@@ -51,18 +51,12 @@ def _cmd_sim(args) -> int:
         print(f"LISTENING tcp://{dev.host}:{dev.tcp_port}", flush=True)
     else:
         print(f"simulated testbed on tcp://{dev.host}:{dev.tcp_port} (Ctrl-C to stop)", flush=True)
-    master = None
     if args.pty:
-        import tty
+        from .sim.pty import PtyMasterStream
 
-        master, slave = os.openpty()
-        tty.setraw(master)
-        tty.setraw(slave)
-        from .link.transports import SerialStream
-
-        name = os.ttyname(slave)
-        dev.attach_stream(SerialStream(name, 921600))
-        print(f"serial link on serial://{os.ttyname(master)}", flush=True)
+        pty = PtyMasterStream()
+        dev.attach_stream(pty)
+        print(f"serial link on serial://{pty.slave_name}", flush=True)
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:

@@ -65,6 +65,7 @@ class _Pending:
         self.reply_bytes = b""
         self.last_send = 0.0
         self.error: Exception | None = None
+        self.on_stage: Callable[[StageRecord], None] | None = None
 
 
 class DeviceClient:
@@ -197,7 +198,9 @@ class DeviceClient:
                 continue
             if any(s.stage == stage for s in p.result.stages):
                 continue                     # a re-sent answer to a retried command
-            p.result.stages.append(StageRecord(stage, reason, now, tick))
+            record = StageRecord(stage, reason, now, tick)
+            p.result.stages.append(record)
+            self._notify(p.on_stage, record)
             if stage in ("ACCEPTED", "REJECTED"):
                 self.stats.clock.observe(p.last_send, now, tick)
                 p.answered.set()
@@ -230,12 +233,14 @@ class DeviceClient:
         frame = self.codec.frame(self.dictionary.packet("COMMAND").id, payload, seq, 0)
         result = CommandResult(name, seq, dict(arguments))
         p = _Pending(result)
+        p.on_stage = on_stage
         with self._lock:
             self._pending[seq] = p
         defaults = self.dictionary.command_defaults
         accept_timeout = float(defaults["accept_timeout_s"])
         try:
             for attempt in range(int(defaults["retries"]) + 1):
+                result.retries = attempt
                 p.last_send = time.time()
                 stage = StageRecord("SENT" if attempt == 0 else "RETRY", "OK", p.last_send)
                 result.stages.append(stage)
@@ -244,14 +249,12 @@ class DeviceClient:
                     self.command_link.write(frame)
                 if p.answered.wait(accept_timeout):
                     break
-                result.retries += 1
             else:
                 result.stages.append(StageRecord("TIMEOUT", "NO_ANSWER", time.time()))
                 self._notify(on_stage, result.stages[-1])
                 raise CommandTimeout(
                     f"{name} (seq {seq}): no answer from the device after {result.retries} "
                     f"retries of {accept_timeout} s - is the link up?")
-            self._notify(on_stage, result.stages[-1])
             if not p.finished.wait(cmd.timeout_s):
                 result.stages.append(StageRecord("TIMEOUT", "NOT_COMPLETED", time.time()))
                 self._notify(on_stage, result.stages[-1])
@@ -260,7 +263,6 @@ class DeviceClient:
             if p.error is not None:
                 raise p.error
             last = result.stages[-1]
-            self._notify(on_stage, last)
             if last.stage == "REJECTED":
                 raise self._rejection(cmd.name, seq, last.reason, p.reply_bytes)
             if last.stage == "FAILED":
@@ -290,8 +292,13 @@ class DeviceClient:
 
     @staticmethod
     def _notify(cb, stage: StageRecord) -> None:
+        """Report a stage as it happens (caller's thread for SENT/RETRY/TIMEOUT, the
+        reader thread for the device's stages); a failing callback is only logged."""
         if cb is not None:
-            cb(stage)
+            try:
+                cb(stage)
+            except Exception:
+                log.exception("command stage callback failed")
 
     # ------------------------------------------------------------------ session
     def connect(self, take_over: bool = False) -> CommandResult:

@@ -61,7 +61,7 @@ class SimulatedDevice:
         self._ids = itertools.count(1)
         self._seq = {p.name: 0 for p in self.dictionary.packets}
         self._listener: socket.socket | None = None
-        self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        self._udp: socket.socket | None = None
         self._threads: list[threading.Thread] = []
         #: test hook: called with each telemetry datagram; return None to drop it
         self.datagram_filter: Callable[[bytes], bytes | None] | None = None
@@ -82,6 +82,7 @@ class SimulatedDevice:
                 raise PortInUseError(f"TCP port {self._requested_port} on {self.host} is already "
                                      f"in use - another simulator running? choose --tcp-port") from None
             raise LinkError(f"cannot listen on {self.host}:{self._requested_port} ({exc.strerror})") from None
+        self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
         lst.listen(4)
         lst.settimeout(0.1)
         self._listener = lst
@@ -106,7 +107,8 @@ class SimulatedDevice:
             conn.transport.close()
         for t in self._threads:
             t.join(timeout=2.0)
-        self._udp.close()
+        if self._udp is not None:
+            self._udp.close()
 
     def __enter__(self) -> "SimulatedDevice":
         return self.start()

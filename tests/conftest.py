@@ -1,0 +1,46 @@
+"""Shared fixtures: the real dictionary, a simulated device on loopback, a client."""
+
+from __future__ import annotations
+
+import os
+import time
+
+os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+
+import pytest
+
+from groundstation.dictionary import load_dictionary
+from groundstation.link import open_client
+from groundstation.sim import SimulatedDevice
+
+
+def wait_for(predicate, timeout: float = 5.0, interval: float = 0.005):
+    """Poll until predicate() is true; bounded, so a broken link fails instead of hanging."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(interval)
+    raise AssertionError(f"condition not met within {timeout} s")
+
+
+@pytest.fixture(scope="session")
+def dictionary():
+    return load_dictionary()
+
+
+@pytest.fixture
+def device(dictionary):
+    """A simulated device whose clock the test advances (pacing='manual')."""
+    dev = SimulatedDevice(dictionary, pacing="manual", seed=1).start()
+    yield dev
+    dev.stop()
+
+
+@pytest.fixture
+def client(dictionary, device):
+    """A started client on the device, not yet connected; heartbeat off (tests drive time)."""
+    c = open_client(dictionary, f"127.0.0.1:{device.tcp_port}", heartbeat=False)
+    yield c
+    c.close()
