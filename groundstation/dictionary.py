@@ -371,7 +371,10 @@ def _parse_packets(doc: dict, path: Path) -> tuple[PacketDef, ...]:
         values = [getattr(p, attr) for p in packets]
         dupes = {v for v in values if values.count(v) > 1}
         if dupes:
-            raise DictionaryError(f"{path}: packet {attr} used twice: {sorted(dupes)}")
+            v = min(dupes)
+            names = ", ".join(f"'{p.name}'" for p in packets if getattr(p, attr) == v)
+            shown = f"0x{v:02X}" if attr == "id" else f"'{v}'"
+            raise DictionaryError(f"{path}: packet {attr} {shown} used twice: packets {names}")
     return tuple(packets)
 
 
@@ -401,7 +404,10 @@ def _parse_commands(doc: dict, path: Path) -> tuple[tuple[CommandDef, ...], dict
         values = [getattr(c, attr) for c in commands]
         dupes = {v for v in values if values.count(v) > 1}
         if dupes:
-            raise DictionaryError(f"{path}: command {attr} used twice: {sorted(dupes)}")
+            v = min(dupes)
+            names = ", ".join(f"'{c.name}'" for c in commands if getattr(c, attr) == v)
+            shown = f"0x{v:04X} ({v})" if attr == "opcode" else f"'{v}'"
+            raise DictionaryError(f"{path}: command {attr} {shown} used twice: commands {names}")
     return tuple(commands), defaults
 
 

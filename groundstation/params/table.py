@@ -46,9 +46,15 @@ def problems(dictionary: Dictionary, values: Mapping[str, Any]) -> list[str]:
         if v.shape != p.shape:
             out.append(f"'{p.name}' has shape {v.shape}, expected {p.shape}")
             continue
+        lo, hi = p.value_range
+        if p.dtype.kind == "f":
+            # compare at the table's precision: 81.3 stored as f32 is 81.30000305, and
+            # must still count as within a range that ends at 81.3
+            native = p.dtype.newbyteorder("=")
+            v, lo, hi = v.astype(native), native.type(lo), native.type(hi)
         if not np.all(np.isfinite(v)):
             out.append(f"'{p.name}' is not finite")
-        elif np.any(v < p.value_range[0]) or np.any(v > p.value_range[1]):
+        elif np.any(v < lo) or np.any(v > hi):
             out.append(f"'{p.name}' = {values[p.name]!r} {p.units} outside "
                        f"[{p.value_range[0]}, {p.value_range[1]}]")
     return out

@@ -367,6 +367,9 @@ class Firmware:
             self.watchdog_expired = True
             self._emit("CRITICAL", "WATCHDOG_EXPIRED",
                        f"no heartbeat for {self.params['watchdog_timeout']} s: motors off")
+        played = 0                       # 1-based index of the profile sample this period
+        if self.armed and self.profile_active:
+            played = self.profile_pos + 1
         i1, i2 = self._currents()
         sat = (abs(i1) >= self.plant.i_max[0], abs(i2) >= self.plant.i_max[1])
         meas = self.plant.step(i1, i2, 1.0 / self.rate)
@@ -375,7 +378,7 @@ class Firmware:
             self.fault = self.faults["OVER_TRAVEL"]
             self._emit("ERROR", "FAULT", "outer axis beyond the travel limit: motors off")
         status = {"armed": self.armed, "coarse_saturated": sat[0], "fine_saturated": sat[1],
-                  "profile_active": self.profile_active,
+                  "profile_active": played > 0,
                   "friction_comp_on": self.friction_comp, "fault": self.fault != 0}
         err = self.reference - meas["encoder_inner"] if self.mode in (
             self.modes["RELATIVE"], self.modes["INERTIAL"]) else 0.0
@@ -383,7 +386,7 @@ class Firmware:
                 "error_angle": err, "error_rate": 0.0,
                 "torque_coarse_cmd": i1 * self.plant.kt[0], "torque_fine_cmd": i2 * self.plant.kt[1],
                 "friction_comp_torque": 0.0,
-                "profile_index": self.profile_pos if self.profile_active else 0}
+                "profile_index": played}
 
     def _currents(self) -> tuple[float, float]:
         if not self.armed:

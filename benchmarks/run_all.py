@@ -1,0 +1,20 @@
+"""`make bench`: every benchmark, one after the other, printing its figures.
+
+Results are also written to benchmarks/results/*.json (not committed); the README's
+performance section quotes them with the machine they came from.
+"""
+
+from __future__ import annotations
+
+import runpy
+import sys
+from pathlib import Path
+
+HERE = Path(__file__).parent
+BENCHES = ["bench_codec.py"]
+
+if __name__ == "__main__":
+    for name in BENCHES:
+        print(f"== {name}", flush=True)
+        sys.argv = [str(HERE / name)]
+        runpy.run_path(str(HERE / name), run_name="__main__")
