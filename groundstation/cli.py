@@ -90,12 +90,17 @@ def _cmd_monitor(args) -> int:
                   f"{info['firmware_version'] & 255}, protocol {d.version}, session "
                   f"{result.reply['session_token']:08x}", flush=True)
             t_end = time.monotonic() + args.duration if args.duration else None
+            reported: set[int] = set()
             while t_end is None or time.monotonic() < t_end:
                 time.sleep(args.interval)
                 if client.link_state != "up":
                     print(f"link {client.link_state}: {client.link_error}", flush=True)
                     return 1
                 print(format_snapshot(client.stats.snapshot()), flush=True)
+                for err in client.stats.recent_errors():
+                    if id(err) not in reported:
+                        reported.add(id(err))
+                        print(f"  {type(err).__name__}: {err}", flush=True)
         except KeyboardInterrupt:
             pass
         finally:

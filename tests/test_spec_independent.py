@@ -539,3 +539,15 @@ def test_spec_default_parameter_table():
     assert table == packed
     stated = re.search(r"Its CRC-32 \(§2\.1\) is `0x([0-9A-F]{8})`", text).group(1)
     assert zlib.crc32(table) == int(stated, 16)
+
+
+def test_spec_dictionary_hash_recipe(dictionary):
+    """§8's recipe, followed with hashlib + json + tomllib, gives the codec's hash."""
+    import hashlib
+    import json
+
+    docs = {"telemetry": load_toml("telemetry.toml"), "commands": load_toml("commands.toml"),
+            "parameters": load_toml("parameters.toml")}
+    canonical = json.dumps(docs, sort_keys=True, separators=(",", ":"), ensure_ascii=True)
+    digest = hashlib.sha256(canonical.encode("ascii")).digest()
+    assert struct.unpack(">I", digest[:4])[0] == dictionary.hash

@@ -93,8 +93,9 @@ class FrameScanner:
         frame_len = length + HEADER_SIZE + CRC_SIZE
         complete = cand + frame_len <= n
         if segment is not None and len(cand):
+            # a frame must begin and end in the same datagram (the last one included)
             last = np.minimum(cand + frame_len, n) - 1
-            good_hdr &= segment[cand] == segment[last]
+            good_hdr &= complete & (segment[cand] == segment[last])
 
         hs, hl, hc, hp = cand[good_hdr], frame_len[good_hdr], complete[good_hdr], pid[good_hdr]
         if len(hs) and hc.all() and np.array_equal(hs[1:], hs[:-1] + hl[:-1]):
@@ -104,12 +105,16 @@ class FrameScanner:
                 acc = np.arange(len(hs))
                 pending = n
             else:
-                acc, pending = self._walk(arr, hs, hl, hc, ok)
+                acc, pending = self._walk(arr, hs, hl, hc, ok, final)
         else:
-            acc, pending = self._walk(arr, hs, hl, hc, None)
+            acc, pending = self._walk(arr, hs, hl, hc, None, final)
         starts, lengths, ids = hs[acc], hl[acc], hp[acc]
 
         consumed = n if final else min(pending, head_cut, n - 1 if n and arr[-1] == _SYNC0 else n)
+        if len(starts):
+            # a sync pattern (or lone 0xEB) inside the last accepted frame is payload: never
+            # keep the tail of an accepted frame for the next scan
+            consumed = max(consumed, int(starts[-1] + lengths[-1]))
         self._count_rejects(arr, cand, good_hdr, version, pid, length, starts, lengths, consumed)
         # junk = bytes consumed outside accepted frames; each junk region is one resync
         ends = starts + lengths
@@ -120,8 +125,9 @@ class FrameScanner:
         self.counters.frames += len(starts)
         return _Scan(starts, ids, lengths, consumed)
 
-    def _walk(self, arr, hs, hl, hc, ok):
-        """Greedy left-to-right acceptance; CRC checked per candidate as needed."""
+    def _walk(self, arr, hs, hl, hc, ok, final=False):
+        """Greedy left-to-right acceptance; CRC checked per candidate as needed.  With
+        final=True no more bytes will come: an incomplete candidate is junk, not a wait."""
         accepted = []
         pos = 0
         pending = len(arr)
@@ -131,6 +137,8 @@ class FrameScanner:
             if s < pos:
                 continue           # a sync-like pattern inside an accepted frame
             if not hc[i]:
+                if final:
+                    continue       # truncated at the end of the stream: look further on
                 pending = s        # may be a frame still arriving
                 break
             good = bool(ok[i]) if ok is not None else bool(
@@ -156,22 +164,31 @@ class FrameScanner:
             k = np.searchsorted(starts, cand, side="right") - 1
             inside = (k >= 0) & (cand < starts[np.maximum(k, 0)] + lengths[np.maximum(k, 0)])
             bad &= ~inside
-        for i in np.flatnonzero(bad)[:64]:
+        bad_idx = np.flatnonzero(bad)
+        wrong_version = version[bad_idx] != self._version
+        unknown = ~wrong_version & ~self._known[pid[bad_idx]]
+        self.counters.version_errors += int(np.count_nonzero(wrong_version))
+        self.counters.unknown_packet_errors += int(np.count_nonzero(unknown))
+        self.counters.length_errors += int(np.count_nonzero(~wrong_version & ~unknown))
+        # messages only for the last few (recent_errors keeps no more)
+        for i in bad_idx[-self.counters.recent_errors.maxlen:]:
             off, v, p, ln = int(cand[i]), int(version[i]), int(pid[i]), int(length[i])
             if v != self._version:
-                self.counters.version_errors += 1
                 self._remember(ProtocolVersionError(
                     f"frame at stream offset +{off} is protocol version {v}; this ground "
                     f"station speaks version {self._version}"
                     + (" - update the ground station" if v > self._version else "")))
             elif not self._known[p]:
-                self.counters.unknown_packet_errors += 1
                 self._remember(UnknownPacketError(
                     f"frame at stream offset +{off} has packet id 0x{p:02X}, which is not in "
                     f"the telemetry dictionary"))
             else:
                 lo, hi = self._min_len[p], self._max_len[p]
-                self.counters.length_errors += 1
+                if lo <= ln <= hi:       # only a datagram boundary makes a fitting length bad
+                    self._remember(FrameLengthError(
+                        f"{self.codec.packet(p).name} frame at offset +{off}: its length {ln} "
+                        f"reaches beyond the end of its datagram (frame truncated or split)"))
+                    continue
                 self._remember(FrameLengthError(
                     f"{self.codec.packet(p).name} frame at stream offset +{off} has length "
                     f"{ln}, expected {lo}{'' if lo == hi else f'..{hi}'} bytes"))

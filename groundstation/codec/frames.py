@@ -130,6 +130,12 @@ class FrameCodec:
                 raise EncodeError(
                     f"{pkt.name}.{item.name}: value outside the wire range of {item.type} "
                     f"({info.min}..{info.max} counts)")
+        elif dt.kind == "f":
+            raw = np.asarray(raw, dtype=np.float64)
+            if raw.size and np.any(np.abs(raw[np.isfinite(raw)]) > float(np.finfo(dt).max)):
+                raise EncodeError(
+                    f"{pkt.name}.{item.name}: value outside the range of {item.type} "
+                    f"(+-{float(np.finfo(dt).max):.4g})")
         return raw
 
     def encode_variable(self, packet: str | int | PacketDef, values: Mapping[str, Any],
@@ -165,19 +171,23 @@ class FrameCodec:
     def decode_variable(self, pkt: PacketDef, frames: list[bytes], host_time: np.ndarray) -> TelemetryBlock:
         """Checked frames of one variable-length packet -> block (one Python parse each)."""
         header = np.frombuffer(b"".join(f[:HEADER_SIZE] for f in frames), HEADER_DTYPE)
-        rows = [decode_items(pkt.items, f[HEADER_SIZE:-CRC_SIZE], pkt.name) for f in frames]
+        fixed_end = HEADER_SIZE + pkt.fixed_payload_size
+        # the fixed items as raw wire values (converted once, by _item_columns)
+        fixed = np.frombuffer(b"".join(f[HEADER_SIZE:fixed_end] for f in frames),
+                              pkt.payload_dtype)
         cols: dict[str, np.ndarray] = {
             "sequence": header["sequence"].astype(np.uint32),
             "tick": header["tick"].astype(np.uint32),
         }
         for item in pkt.items:
-            vals = [r[item.name] for r in rows]
             if item.is_variable:
-                arr = np.empty(len(vals), dtype=object)
-                arr[:] = vals
+                arr = np.empty(len(frames), dtype=object)
+                rests = [bytes(f[fixed_end:-CRC_SIZE]) for f in frames]
+                arr[:] = [r.decode("utf-8", errors="replace") for r in rests] \
+                    if item.type == "str" else rests
                 cols[item.name] = arr
             else:
-                _item_columns(item, np.asarray(vals, dtype=item.wire_dtype.newbyteorder("=")), cols)
+                _item_columns(item, fixed[item.name], cols)
         return TelemetryBlock(pkt, cols, host_time, frames=list(frames))
 
     def decode_frame(self, frame: bytes, host_time: float = 0.0) -> TelemetryBlock:
@@ -259,6 +269,8 @@ def encode_items(items: tuple[Item, ...], values: Mapping[str, Any], where: str)
             info = np.iinfo(dt)
             if not info.min <= raw <= info.max:
                 raise EncodeError(f"{where}.{item.name} = {value} does not fit {item.type}")
+        elif abs(float(raw)) > float(np.finfo(dt).max):
+            raise EncodeError(f"{where}.{item.name} = {value} does not fit {item.type}")
         out += np.asarray(raw, dtype=dt).tobytes()
     return bytes(out)
 

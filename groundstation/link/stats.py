@@ -116,6 +116,11 @@ class LinkStatistics:
         with self._lock:
             self._framing_sources.append(counters)
 
+    def recent_errors(self) -> list[Exception]:
+        """The last few decode errors (specific exceptions with messages), oldest first."""
+        with self._lock:
+            return [e for src in self._framing_sources for e in list(src.recent_errors)]
+
     def update(self, block: TelemetryBlock) -> None:
         n = len(block)
         if not n:
