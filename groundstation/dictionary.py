@@ -72,6 +72,16 @@ class Item:
     def is_variable(self) -> bool:
         return self.type in VARIABLE_TYPES
 
+    def in_range(self, value: float) -> bool:
+        """Is `value` inside `range`?  An f32 item is compared at f32 precision, so that
+        a bound such as 0.349 still admits itself after the trip through the wire."""
+        if self.value_range is None:
+            return True
+        lo, hi = self.value_range
+        if self.type == "f32":
+            value, lo, hi = np.float32(value), np.float32(lo), np.float32(hi)
+        return bool(lo <= value <= hi)
+
     @property
     def wire_dtype(self) -> np.dtype:
         return np.dtype(WIRE_TYPES[self.type])

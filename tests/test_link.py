@@ -6,6 +6,7 @@ from __future__ import annotations
 import shutil
 import socket
 import threading
+import zlib
 from pathlib import Path
 
 import numpy as np
@@ -186,6 +187,37 @@ def test_command_timeout_names_the_command(dictionary):
         silent.close()
 
 
+def test_a_device_speaking_another_major_version_is_named(dictionary):
+    """A firmware of protocol 2 answers in frames this ground station cannot read."""
+    codec = FrameCodec(dictionary)
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+
+    def newer_firmware():
+        conn, _ = server.accept()
+        with conn:
+            conn.recv(4096)
+            frame = bytearray(codec.frame(dictionary.packet("RESPONSE").id, bytes(9), 0, 0))
+            frame[2] = 2                                   # protocol major version 2
+            body = bytes(frame[:-4])
+            conn.sendall(body + zlib.crc32(body).to_bytes(4, "little"))
+            while conn.recv(4096):          # until the client gives up and closes
+                pass
+
+    t = threading.Thread(target=newer_firmware, daemon=True)
+    t.start()
+    client = open_client(dictionary, f"tcp://127.0.0.1:{server.getsockname()[1]}?telemetry=stream",
+                         heartbeat=False)
+    try:
+        with pytest.raises(DictionaryMismatchError, match="protocol version 2.*speaks version 1"):
+            client.connect()
+    finally:
+        client.close()
+        t.join(2)
+        server.close()
+
+
 # ------------------------------------------------------------------ watchdog and abort
 
 
@@ -309,7 +341,7 @@ def test_serial_link_over_a_pseudo_terminal(dictionary, device):
 
     pty = PtyMasterStream()
     device.attach_stream(pty)
-    c = open_client(dictionary, f"serial://{pty.slave_name}?baud=921600", heartbeat=False)
+    c = open_client(dictionary, f"serial://{pty.slave_name}?baud=2000000", heartbeat=False)
     blocks = collect(c)
     lost = []
     c.add_link_listener(lambda state, msg: lost.append((state, msg)))

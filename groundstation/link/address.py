@@ -3,7 +3,7 @@
     tcp://HOST:PORT            command channel over TCP, telemetry over UDP (default)
     HOST:PORT                  same as tcp://
     tcp://HOST:PORT?telemetry=stream   telemetry on the TCP stream (no UDP)
-    serial:///dev/ttyUSB0?baud=921600  everything over one serial port
+    serial:///dev/ttyUSB0?baud=2000000  everything over one serial port
     serial://loop://           pyserial URLs work too (loop://, socket://...)
 """
 
@@ -17,7 +17,8 @@ from ..errors import LinkError
 from .client import DeviceClient
 from .transports import SerialStream, TcpStream, UdpReceiver
 
-DEFAULT_BAUD = 921600
+# 2 Mbaud: full-rate HIGH_RATE needs 78 B x 1200/s = 93.6 kB/s, more than 921600 8N1 carries
+DEFAULT_BAUD = 2_000_000
 
 
 @dataclass(frozen=True)
@@ -43,7 +44,7 @@ def parse_address(text: str) -> DeviceAddress:
         port, _, query = rest.partition("?")
         q = parse_qs(query)
         if not port:
-            raise LinkError(f"'{text}': no serial port given (e.g. serial:///dev/ttyUSB0?baud=921600)")
+            raise LinkError(f"'{text}': no serial port given (e.g. serial:///dev/ttyUSB0?baud=2000000)")
         try:
             baud = int(q.get("baud", [DEFAULT_BAUD])[0])
         except ValueError:

@@ -21,7 +21,7 @@ from ..codec.frames import decode_items, encode_items
 from ..dictionary import Dictionary
 from ..errors import (CommandArgumentError, CommandFailed, CommandRejected, CommandTimeout,
                       DictionaryMismatchError, EncodeError, GroundStationError, LinkLostError,
-                      NotConnectedError)
+                      NotConnectedError, ProtocolVersionError)
 from .stats import LinkStatistics
 from .transports import StreamTransport, UdpReceiver
 
@@ -252,6 +252,12 @@ class DeviceClient:
             else:
                 result.stages.append(StageRecord("TIMEOUT", "NO_ANSWER", time.time()))
                 self._notify(on_stage, result.stages[-1])
+                versions = [e for e in self.stats.recent_errors()
+                            if isinstance(e, ProtocolVersionError)]
+                if versions:       # the device answers, but in another protocol version
+                    raise DictionaryMismatchError(
+                        f"{name}: the device answers in another protocol version - "
+                        f"{versions[-1]}", "DICTIONARY_MISMATCH")
                 raise CommandTimeout(
                     f"{name} (seq {seq}): no answer from the device after {result.retries} "
                     f"retries of {accept_timeout} s - is the link up?")

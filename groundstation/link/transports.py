@@ -110,7 +110,7 @@ class TcpStream(StreamTransport):
 class SerialStream(StreamTransport):
     """A serial port (or any pyserial URL: loop://, socket://host:port, spy://...)."""
 
-    def __init__(self, port: str, baudrate: int = 921600, port_factory=None):
+    def __init__(self, port: str, baudrate: int = 2_000_000, port_factory=None):
         super().__init__()
         self.name = f"serial:{port}@{baudrate}"
         try:

@@ -155,7 +155,7 @@ class Firmware:
                 continue
             if isinstance(v, float) and not math.isfinite(v):
                 return item.name
-            if item.value_range and not item.value_range[0] <= v <= item.value_range[1]:
+            if not item.in_range(v):
                 return item.name
             if item.states and v not in item.states.values():
                 return item.name
@@ -314,6 +314,8 @@ class Firmware:
         return self._ok()
 
     def _cmd_profile_write(self, v, peer):
+        if len(v["samples"]) % 4:
+            return self._reject("BAD_LENGTH")      # whole f32 samples only
         return self._write_block("profile", 4 * v["offset"], v["samples"])
 
     def _cmd_profile_commit(self, v, peer):
