@@ -42,11 +42,18 @@ def _cmd_protocol(args) -> int:
 
 def _cmd_sim(args) -> int:
     from .sim import SimulatedDevice
+    from .sim.testbed import load_testbed
 
+    stop = threading.Event()
+    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    testbed = load_testbed(args.testbed)        # refuses a bad file before anything starts
     dev = SimulatedDevice(load_dictionary(args.protocol_dir), host=args.host,
                           tcp_port=args.tcp_port, pacing=args.pacing, seed=args.seed,
-                          frames_per_datagram=args.frames_per_datagram)
+                          frames_per_datagram=args.frames_per_datagram, testbed=testbed)
     dev.start()
+    if not args.announce:
+        print(f"testbed: {testbed.name} ({testbed.path}), friction model "
+              f"{testbed.friction['model']}, seed {args.seed}", flush=True)
     if args.announce:
         print(f"LISTENING tcp://{dev.host}:{dev.tcp_port}", flush=True)
     else:
@@ -57,8 +64,6 @@ def _cmd_sim(args) -> int:
         pty = PtyMasterStream()
         dev.attach_stream(pty)
         print(f"serial link on serial://{pty.slave_name}", flush=True)
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
     try:
         while not stop.wait(0.5):
             pass
@@ -77,7 +82,7 @@ def _cmd_monitor(args) -> int:
     sim = None
     address = args.device
     if address == "sim":
-        sim = SimulatorProcess(pacing="realtime")
+        sim = SimulatorProcess(pacing="realtime", testbed=args.testbed)
         address = sim.start()
         print(f"started the simulated testbed on {address}", flush=True)
     try:
@@ -133,6 +138,8 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("sim", help="run the simulated testbed")
     s.add_argument("--host", default="127.0.0.1", help="address to bind (default 127.0.0.1)")
     s.add_argument("--tcp-port", type=int, default=5020, help="command port (0: any free port)")
+    s.add_argument("--testbed", default=None,
+                   help="testbed file (default: profiles/testbeds/relative_2dof.toml)")
     s.add_argument("--pacing", choices=["realtime", "fast"], default="realtime")
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--frames-per-datagram", type=int, default=1)
@@ -147,6 +154,7 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "monitor":
             s.add_argument("--device", default="sim",
                            help="sim | tcp://HOST:PORT | HOST:PORT | serial://PORT?baud=N")
+        s.add_argument("--testbed", default=None, help="testbed file for --device sim")
         s.add_argument("--duration", type=float, default=0.0, help="seconds (0: until Ctrl-C)")
         s.add_argument("--interval", type=float, default=1.0, help="seconds between lines")
         s.add_argument("--take-over", action="store_true",

@@ -188,6 +188,7 @@ class ParameterDef:
     default: Any
     description: str
     shape: tuple[int, ...] = ()
+    filter: str = ""              # "sos": cascade of second-order sections, rows b0 b1 b2 a0 a1 a2
 
     @property
     def dtype(self) -> np.dtype:
@@ -434,17 +435,38 @@ def _parse_parameters(doc: dict, path: Path) -> tuple[ParameterDef, ...]:
         if not isinstance(shape, list) or not all(isinstance(s, int) and s > 0 for s in shape):
             raise DictionaryError(f"{where}: 'shape' must be a list of positive integers")
         lo, hi = _pair(_require(raw, "range", where, list), where, "range")
-        default = _require(raw, "default", where, (int, float, list))
+        filt = str(raw.get("filter", ""))
+        if filt not in ("", "sos") or (filt == "sos" and (len(shape) != 2 or shape[1] != 6)):
+            raise DictionaryError(f"{where}: filter = \"sos\" needs shape [sections, 6]")
+        default = _parameter_default(_require(raw, "default", where, (int, float, list, str)),
+                                     tuple(shape), where)
         if not all(lo <= v <= hi for v in np.ravel(default)):
             raise DictionaryError(f"{where}: default {default!r} outside its range [{lo}, {hi}]")
         params.append(ParameterDef(
             id=_require(raw, "id", where, int), name=name, type=type_,
             units=str(raw.get("units", "")), value_range=(lo, hi), default=default,
-            description=str(raw.get("description", "")), shape=tuple(shape)))
+            description=str(raw.get("description", "")), shape=tuple(shape), filter=filt))
     ids = [p.id for p in params]
     if len(set(ids)) != len(ids) or len({p.name for p in params}) != len(params):
         raise DictionaryError(f"{path}: parameter ids and names must be unique")
     return tuple(sorted(params, key=lambda p: p.id))
+
+
+#: named defaults for array parameters (a 12x6 identity cascade is unreadable as a literal)
+_SOS_ROWS = {"sos_zero": [0.0, 0.0, 0.0, 1.0, 0.0, 0.0], "sos_identity": [1.0, 0.0, 0.0, 1.0, 0.0, 0.0]}
+
+
+def _parameter_default(default, shape: tuple[int, ...], where: str):
+    if isinstance(default, str):
+        if default in _SOS_ROWS and len(shape) == 2 and shape[1] == 6:
+            rows = [list(_SOS_ROWS["sos_identity"]) for _ in range(shape[0])]
+            rows[0] = list(_SOS_ROWS[default])
+            return rows
+        raise DictionaryError(f"{where}: unknown named default {default!r} "
+                              f"(known for [n, 6] cascades: {', '.join(_SOS_ROWS)})")
+    if np.shape(default) != shape:
+        raise DictionaryError(f"{where}: default has shape {np.shape(default)}, expected {shape}")
+    return default
 
 
 def dictionary_hash(docs: dict[str, dict]) -> int:

@@ -55,11 +55,12 @@ def test_sim_serves_a_serial_pty_and_stops_on_sigterm():
                              "--pty"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             cwd=ROOT, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     try:
-        first = proc.stdout.readline()
-        second = proc.stdout.readline()
-        assert "tcp://127.0.0.1:" in first
-        assert second.startswith("serial link on serial:///dev/pts/")
-        out = run("monitor", "--device", second.split()[-1], "--duration", "1.5", timeout=60)
+        lines = [proc.stdout.readline() for _ in range(3)]
+        assert any("simulated testbed on tcp://127.0.0.1:" in ln for ln in lines), lines
+        assert any("friction model DB-DHM" in ln for ln in lines), lines
+        serial_line = [ln for ln in lines if ln.startswith("serial link on serial:///dev/pts/")]
+        assert serial_line, lines
+        out = run("monitor", "--device", serial_line[0].split()[-1], "--duration", "1.5", timeout=60)
         assert out.returncode == 0, out.stderr
         assert "HIGH_RATE" in out.stdout
     finally:

@@ -16,8 +16,8 @@ from groundstation.params import table as ptable
 def upload(client, dictionary, values, version=3, corrupt_crc=False):
     blob = ptable.pack(dictionary, values) if isinstance(values, dict) else values
     client.command("PARAM_BEGIN", table_version=version, table_length=len(blob))
-    for off in range(0, len(blob), 8):                  # several blocks on purpose
-        client.command("PARAM_WRITE", offset=off, data=blob[off:off + 8])
+    for off in range(0, len(blob), 700):                # several blocks on purpose
+        client.command("PARAM_WRITE", offset=off, data=blob[off:off + 700])
     crc = zlib.crc32(blob) ^ (1 if corrupt_crc else 0)
     return client.command("PARAM_COMMIT", table_crc=crc), blob
 
@@ -25,7 +25,7 @@ def upload(client, dictionary, values, version=3, corrupt_crc=False):
 def read_back(client, size):
     out = b""
     while len(out) < size:
-        out += client.command("PARAM_READ", offset=len(out), count=min(16, size - len(out))).reply["data"]
+        out += client.command("PARAM_READ", offset=len(out), count=min(1000, size - len(out))).reply["data"]
     return out
 
 

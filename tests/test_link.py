@@ -331,7 +331,8 @@ def test_telemetry_on_the_command_stream(dictionary, device):
         c.connect()
         device.run_ticks(240)
         wait_for(lambda: frames_of(blocks, "HIGH_RATE") >= 240)
-        assert frames_of(blocks, "HOUSEKEEPING") == 2
+        wait_for(lambda: frames_of(blocks, "HOUSEKEEPING") >= 2)
+        assert frames_of(blocks, "HOUSEKEEPING") == 2 and frames_of(blocks, "HIGH_RATE") == 240
     finally:
         c.close()
 

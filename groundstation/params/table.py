@@ -57,6 +57,49 @@ def problems(dictionary: Dictionary, values: Mapping[str, Any]) -> list[str]:
         elif np.any(v < lo) or np.any(v > hi):
             out.append(f"'{p.name}' = {values[p.name]!r} {p.units} outside "
                        f"[{p.value_range[0]}, {p.value_range[1]}]")
+        else:
+            if p.filter == "sos":
+                out += [f"'{p.name}' {msg}" for msg in sos_problems(v)]
+    out += _slope_table_problems(values)
+    return out
+
+
+POLE_TOLERANCE = 1e-9
+
+
+def sos_problems(sos: np.ndarray) -> list[str]:
+    """Why a cascade of second-order sections may not run on the device.
+
+    Each row is b0 b1 b2 a0 a1 a2 with a0 = 1; every pole must lie inside the unit circle
+    except a pole at z = 1 exactly (an integrator, which the anti-windup handles)."""
+    out = []
+    for i, row in enumerate(np.asarray(sos, dtype=np.float64)):
+        if row[3] != 1.0:
+            out.append(f"section {i}: a0 = {row[3]!r}, must be 1 (normalised)")
+            continue
+        for pole in np.roots(row[3:]) if np.any(row[4:]) else []:
+            if abs(pole) > 1.0 + POLE_TOLERANCE or (
+                    abs(pole) > 1.0 - POLE_TOLERANCE and abs(pole - 1.0) > 1e-6):
+                out.append(f"section {i}: pole at z = {complex(pole):.6g} "
+                           f"(|z| = {abs(pole):.9f}) is not inside the unit circle")
+    return out
+
+
+def _slope_table_problems(values: Mapping[str, Any]) -> list[str]:
+    """The compensation slope table: x from 0 to 2 strictly increasing, slope non-increasing."""
+    if not {"friction_comp_table_points", "friction_comp_table_x",
+            "friction_comp_table_slope"} <= set(values):
+        return []
+    n = int(values["friction_comp_table_points"])
+    x = np.asarray(values["friction_comp_table_x"], dtype=np.float64)[:n]
+    y = np.asarray(values["friction_comp_table_slope"], dtype=np.float64)[:n]
+    out = []
+    if len(x) < 2 or x[0] != 0.0 or abs(x[-1] - 2.0) > 1e-6:
+        out.append("friction_comp_table_x must run from 0 to 2 over the used points")
+    if np.any(np.diff(x) <= 0):
+        out.append("friction_comp_table_x must be strictly increasing")
+    if np.any(np.diff(y) > 0):
+        out.append("friction_comp_table_slope must not increase with x")
     return out
 
 

@@ -16,11 +16,14 @@ import threading
 import time
 from typing import Any, Callable
 
+import numpy as np
+
 from ..codec import FrameCodec, StreamDeframer
 from ..dictionary import Dictionary, load_dictionary
 from ..errors import LinkError, LinkLostError, PortInUseError
 from ..link.transports import StreamTransport, TcpStream
 from .firmware import Firmware
+from .testbed import Testbed
 
 log = logging.getLogger(__name__)
 
@@ -45,12 +48,13 @@ class SimulatedDevice:
 
     def __init__(self, dictionary: Dictionary | None = None, *, host: str = "127.0.0.1",
                  tcp_port: int = 0, pacing: str = "realtime", seed: int = 0,
-                 frames_per_datagram: int = 1, firmware: Firmware | None = None):
+                 frames_per_datagram: int = 1, firmware: Firmware | None = None,
+                 testbed: Testbed | None = None):
         if pacing not in ("realtime", "fast", "manual"):
             raise ValueError(f"pacing must be realtime, fast or manual, not {pacing!r}")
         self.dictionary = dictionary or load_dictionary()
         self.codec = FrameCodec(self.dictionary)
-        self.firmware = firmware or Firmware(self.dictionary, seed=seed)
+        self.firmware = firmware or Firmware(self.dictionary, seed=seed, testbed=testbed)
         self.host = host
         self.pacing = pacing
         self.frames_per_datagram = max(1, frames_per_datagram)
@@ -65,6 +69,10 @@ class SimulatedDevice:
         self._threads: list[threading.Thread] = []
         #: test hook: called with each telemetry datagram; return None to drop it
         self.datagram_filter: Callable[[bytes], bytes | None] | None = None
+        #: function generator output: (first_tick, n) -> n volts, one per period (None: 0 V)
+        self.base_drive: Callable[[int, int], np.ndarray] | None = None
+        #: receives (first_tick, truth array) of every batch: true angles for analysis/tests
+        self.truth_sink: Callable[[int, np.ndarray], None] | None = None
         self.tcp_port: int | None = None
         self._t0: float | None = None
         self._ticks_done = 0
@@ -218,41 +226,68 @@ class SimulatedDevice:
                 self.firmware.overruns += 1
                 log.debug("telemetry send failed: %s", exc)
 
-    def _flush_events(self) -> None:
+    def _event_frames(self) -> list[bytes]:
         fw = self.firmware
         frames = []
         while fw.events:
             level, code, text = fw.events.popleft()
             frames.append(self._frame("EVENT", {"level": level, "code": code, "text": text[:900]}))
-        self._send_telemetry(frames, frame_groups=False)
+        return frames
+
+    def _flush_events(self) -> None:
+        self._send_telemetry(self._event_frames(), frame_groups=False)
 
     def run_ticks(self, n: int) -> None:
         """Advance the device by n control periods and send their telemetry."""
-        if n <= 0:
-            return
-        hr = self.dictionary.packet("HIGH_RATE")
         with self._lock:
-            rows = []
-            hk_frames = []
-            for _ in range(n):
-                rows.append(self.firmware.step())
-                if self.firmware.tick % HOUSEKEEPING_DIVIDER == 0:
-                    hk_frames.append(self.codec.encode(
-                        "HOUSEKEEPING", self.firmware.housekeeping(),
-                        [self._next_seq("HOUSEKEEPING")], [self.firmware.tick]))
-            if self._telemetry_target() is None:
-                self._flush_events()
-                return
-            cols = {k: [r[k] for r in rows] for k in rows[0]}
-            first = self._seq["HIGH_RATE"]
-            self._seq["HIGH_RATE"] = (first + n) & 0xFFFFFFFF
-            ticks = [self.firmware.tick - n + 1 + i for i in range(n)]
-            data = self.codec.encode(hr, cols, [first + i for i in range(n)], ticks)
-            size = len(data) // n
-            frames = [data[i * size:(i + 1) * size] for i in range(n)]
-            self._send_telemetry(frames, frame_groups=True)
-            self._send_telemetry(hk_frames, frame_groups=False)
+            frames, hk_frames = self._simulate(n)
+            if self._telemetry_target() is not None:
+                self._send_telemetry(frames, frame_groups=True)
+                self._send_telemetry(hk_frames, frame_groups=False)
             self._flush_events()
+
+    def _simulate(self, n: int) -> tuple[list[bytes], list[bytes]]:
+        """n periods -> HIGH_RATE frames (one per period) and HOUSEKEEPING frames (10 Hz).
+
+        The batch is cut at housekeeping boundaries so each HOUSEKEEPING frame carries
+        the state of its own tick: batch sizes never change what is sent."""
+        fw = self.firmware
+        hr = self.dictionary.packet("HIGH_RATE")
+        frames: list[bytes] = []
+        hk_frames: list[bytes] = []
+        done = 0
+        while done < n:
+            step = min(n - done, HOUSEKEEPING_DIVIDER - fw.tick % HOUSEKEEPING_DIVIDER)
+            first_tick = fw.tick + 1
+            v_fg = self.base_drive(first_tick, step) if self.base_drive is not None else None
+            cols, truth = fw.run(step, v_fg)
+            if self.truth_sink is not None:
+                self.truth_sink(first_tick, truth)
+            seq = self._seq["HIGH_RATE"]
+            self._seq["HIGH_RATE"] = (seq + step) & 0xFFFFFFFF
+            data = self.codec.encode(hr, cols, np.arange(seq, seq + step),
+                                     np.arange(first_tick, first_tick + step))
+            size = len(data) // step
+            frames += [data[i * size:(i + 1) * size] for i in range(step)]
+            if fw.tick % HOUSEKEEPING_DIVIDER == 0:
+                hk_frames.append(self.codec.encode(
+                    "HOUSEKEEPING", fw.housekeeping(), [self._next_seq("HOUSEKEEPING")], [fw.tick]))
+            done += step
+        return frames, hk_frames
+
+    def run_fast(self, seconds: float, consumer: Callable[[bytes], None], batch: int = 1200) -> int:
+        """Run `seconds` of simulated time as fast as possible, handing the frames (the
+        exact bytes paced mode would stream, in order) to `consumer`; returns periods run."""
+        total = int(round(seconds * self.dictionary.control_rate_hz))
+        done = 0
+        while done < total:
+            n = min(batch, total - done)
+            with self._lock:
+                frames, hk_frames = self._simulate(n)
+                events = self._event_frames()
+            consumer(b"".join(frames) + b"".join(hk_frames) + b"".join(events))
+            done += n
+        return done
 
     def _next_seq(self, packet: str) -> int:
         seq = self._seq[packet]

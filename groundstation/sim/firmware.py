@@ -22,7 +22,9 @@ from ..codec.frames import decode_items, encode_items
 from ..dictionary import CommandDef, Dictionary
 from ..errors import GroundStationError
 from ..params import table as ptable
-from .plant import RigidPlant
+from . import core
+from .engine import Engine
+from .testbed import Testbed, load_testbed
 
 log = logging.getLogger(__name__)
 
@@ -50,42 +52,70 @@ class Firmware:
     """Device-side state machine of the testbed controller."""
 
     def __init__(self, dictionary: Dictionary, *, seed: int = 0, description: str = "",
-                 plant: RigidPlant | None = None):
+                 testbed: Testbed | None = None):
         self.d = dictionary
         self.rate = dictionary.control_rate_hz
         self.modes = dictionary.command("SET_MODE").args[0].states
+        self.targets = dictionary.command("PROFILE_BEGIN").args[1].states
         self.err = dictionary.error_codes
         self.faults = dictionary.packet("HOUSEKEEPING").item_by_name["fault_code"].states
         self.ev = dictionary.event_codes
-        self.description = description or "simulated testbed (trivial rigid plant)"
-        self.plant = plant or RigidPlant(seed=seed)
+        self.testbed = testbed or load_testbed()
+        self.description = description or f"simulated testbed: {self.testbed.name} ({self.testbed.path.name})"
         self._token_rng = random.Random(seed ^ 0x5EED)
-        self.tick = 0
-        self.mode = 0
-        self.armed = False
-        self.fault = 0
-        self.friction_comp = False
-        self.session_token: int | None = None
-        self.session_peer: Any = None
-        self.last_heard_tick = 0
-        self.watchdog_expired = False
-        self.current_cmd = (0.0, 0.0)
-        self.reference = 0.0
         self.params = ptable.default_values(dictionary)
         self.param_blob = ptable.pack(dictionary, self.params)
         self.param_crc = ptable.table_crc(self.param_blob)
         self.param_version = 0
+        self.engine = Engine(self.testbed, self.params, seed=seed, control_rate_hz=self.rate)
+        self.fw = self.engine.fw
+        self.fw[core.FW_COMP_ON] = float(self.params["friction_comp_enabled"])
+        self.session_token: int | None = None
+        self.session_peer: Any = None
+        self.telemetry_port = 0
+        self.watchdog_expired = False
         self._staging: dict[str, _Staging] = {}
         self.profile: dict[str, Any] | None = None
-        self.profile_pos = 0
-        self.profile_active = False
         self.accepted = 0
         self.rejected = 0
         self.overruns = 0
         self.events: deque[tuple[int, int, str]] = deque(maxlen=256)
         self._done: OrderedDict[tuple[int, int], list[Stage]] = OrderedDict()
-        self._last_u = (0.0, 0.0)
-        self._emit("INFO", "BOOT", f"firmware {self.version_string} booted")
+        self._emit("INFO", "BOOT", f"firmware {self.version_string} booted: {self.testbed.name}")
+
+    # ------------------------------------------------------------------ state views
+    # the firmware state lives in the engine's array, shared with the compiled loop
+    @property
+    def tick(self) -> int:
+        return int(self.fw[core.FW_TICK])
+
+    @property
+    def mode(self) -> int:
+        return int(self.fw[core.FW_MODE])
+
+    @mode.setter
+    def mode(self, value: int) -> None:
+        self.fw[core.FW_MODE] = value
+
+    @property
+    def armed(self) -> bool:
+        return self.fw[core.FW_ARMED] > 0.5
+
+    @property
+    def fault(self) -> int:
+        return int(self.fw[core.FW_FAULT])
+
+    @fault.setter
+    def fault(self, value: int) -> None:
+        self.fw[core.FW_FAULT] = value
+
+    @property
+    def friction_comp(self) -> bool:
+        return self.fw[core.FW_COMP_ON] > 0.5
+
+    @property
+    def profile_active(self) -> bool:
+        return self.fw[core.FW_PROF_ACTIVE] > 0.5
 
     # ------------------------------------------------------------------ helpers
     @property
@@ -143,7 +173,7 @@ class Firmware:
         if bad:
             return [Stage(REJECTED, self._reason("OUT_OF_RANGE"))]
         if cmd.needs_session:
-            self.last_heard_tick = self.tick
+            self.fw[core.FW_LAST_HEARD] = self.tick
         handler = getattr(self, f"_cmd_{cmd.name.lower()}")
         return handler(values, peer)
 
@@ -177,8 +207,9 @@ class Firmware:
             self._safe_state()
         self.session_token = self._token_rng.randrange(1, 1 << 32)
         self.session_peer = peer
+        self.fw[core.FW_SESSION] = 1.0
         self.telemetry_port = v["telemetry_port"]
-        self.last_heard_tick = self.tick
+        self.fw[core.FW_LAST_HEARD] = self.tick
         self.watchdog_expired = False
         self._emit("INFO", "SESSION_OPENED", f"session opened by {peer}")
         return self._ok(self._connect_reply(self.session_token))
@@ -191,6 +222,7 @@ class Firmware:
             self._safe_state()
         self.session_token = None
         self.session_peer = None
+        self.fw[core.FW_SESSION] = 0.0
         self._emit("INFO", "SESSION_CLOSED", why)
 
     def _cmd_disconnect(self, v, peer):
@@ -225,9 +257,11 @@ class Firmware:
         if self.mode == self.modes["IDLE"]:
             return self._reject("INVALID_STATE")
         if not self.armed:
-            self.armed = True
-            self.current_cmd = (0.0, 0.0)
-            self.reference = self.plant.angle
+            fw = self.fw
+            fw[core.FW_ARMED] = 1.0
+            fw[core.FW_I1] = fw[core.FW_I2] = fw[core.FW_RATE_REF] = 0.0
+            fw[core.FW_REF] = fw[core.FW_LOS_EST]      # hold where the axis is
+            self.engine.reset_controllers()
             self._emit("INFO", "ARMED", "drives enabled")
         return self._ok()
 
@@ -243,7 +277,7 @@ class Firmware:
         return self._ok()
 
     def _cmd_friction_comp(self, v, peer):
-        self.friction_comp = bool(v["enable"])
+        self.fw[core.FW_COMP_ON] = float(v["enable"])
         return self._ok()
 
     def _cmd_set_currents(self, v, peer):
@@ -251,13 +285,13 @@ class Firmware:
             return self._reject("INVALID_STATE")
         if not self.armed:
             return self._reject("NOT_ARMED")
-        self.current_cmd = (v["current_coarse"], v["current_fine"])
+        self.fw[core.FW_I1], self.fw[core.FW_I2] = v["current_coarse"], v["current_fine"]
         return self._ok()
 
     def _cmd_set_reference(self, v, peer):
         if self.mode not in (self.modes["RELATIVE"], self.modes["INERTIAL"]):
             return self._reject("INVALID_STATE")
-        self.reference = v["reference"]
+        self.fw[core.FW_REF] = v["reference"]
         return self._ok()
 
     def _cmd_param_begin(self, v, peer):
@@ -293,6 +327,7 @@ class Firmware:
             return [Stage(ACCEPTED), Stage(FAILED, self._reason("VALIDATION_FAILED"))]
         # activation happens here, between two step() calls: a control-cycle boundary
         self.params, self.param_blob = values, blob
+        self.engine.apply_parameters(values)
         self.param_crc, self.param_version = zlib.crc32(blob), st.meta["version"]
         del self._staging["param"]
         self._emit("INFO", "PARAMETERS_ACTIVATED",
@@ -325,24 +360,42 @@ class Firmware:
         if zlib.crc32(bytes(st.buffer)) != v["profile_crc"]:
             return [Stage(ACCEPTED), Stage(FAILED, self._reason("CRC_MISMATCH"))]
         samples = np.frombuffer(bytes(st.buffer), ">f4").astype(np.float64)
-        if not np.all(np.isfinite(samples)):
+        if not np.all(np.isfinite(samples)) or not self._profile_in_range(samples, st.meta["target"]):
             return [Stage(ACCEPTED), Stage(FAILED, self._reason("VALIDATION_FAILED"))]
         self.profile = {"samples": samples, **st.meta}
         del self._staging["profile"]
         return self._ok()
+
+    def _profile_in_range(self, samples: np.ndarray, target: int) -> bool:
+        """Samples must respect the same ranges as the commands they stand in for."""
+        t = self.targets
+        if target == t["REFERENCE"]:
+            item = self.d.command("SET_REFERENCE").args[0]
+        elif target in (t["CURRENT_COARSE"], t["CURRENT_FINE"]):
+            item = self.d.command("SET_CURRENTS").args[0 if target == t["CURRENT_COARSE"] else 1]
+        else:
+            return bool(np.all(np.abs(samples) <= self.testbed.sensors["gyro_range"]))
+        return item.in_range(float(samples.min())) and item.in_range(float(samples.max()))
 
     def _cmd_profile_start(self, v, peer):
         if self.profile is None:
             return self._reject("NOTHING_STAGED")
         if not self.armed:
             return self._reject("NOT_ARMED")
-        self.profile_active, self.profile_pos = True, 0
+        t, m = self.targets, self.modes
+        allowed = {t["REFERENCE"]: (m["RELATIVE"], m["INERTIAL"]), t["RATE_REFERENCE"]: (m["INERTIAL"],),
+                   t["CURRENT_COARSE"]: (m["OPEN_LOOP"],), t["CURRENT_FINE"]: (m["OPEN_LOOP"],)}
+        if self.mode not in allowed[self.profile["target"]]:
+            return self._reject("INVALID_STATE")
+        self.engine.load_profile(self.profile["samples"], self.profile["target"])
+        self.fw[core.FW_PROF_POS] = 0.0
+        self.fw[core.FW_PROF_ACTIVE] = 1.0
         self._emit("INFO", "PROFILE_STARTED", f"profile {self.profile['profile_id']} started")
         return self._ok()
 
     def _cmd_profile_stop(self, v, peer):
         if self.profile_active:
-            self.profile_active = False
+            self.fw[core.FW_PROF_ACTIVE] = 0.0
             self._emit("INFO", "PROFILE_STOPPED", "profile stopped by the host")
         return self._ok()
 
@@ -350,76 +403,39 @@ class Firmware:
     def _safe_state(self, keep_mode: bool = False) -> None:
         """Both motors to zero now (this control period), drives off, profile stopped."""
         was_armed = self.armed
-        self.armed = False
-        self.current_cmd = (0.0, 0.0)
-        self.profile_active = False
+        fw = self.fw
+        fw[core.FW_ARMED] = 0.0
+        fw[core.FW_I1] = fw[core.FW_I2] = 0.0
+        fw[core.FW_PROF_ACTIVE] = 0.0
         if not keep_mode:
-            self.mode = self.modes["IDLE"]
+            fw[core.FW_MODE] = self.modes["IDLE"]
         if was_armed:
             self._emit("INFO", "DISARMED", "drives disabled, motors at zero")
 
-    def step(self) -> dict[str, Any]:
-        """One control period: watchdog, controller, plant; returns HIGH_RATE values."""
-        self.tick += 1
-        timeout_ticks = self.params["watchdog_timeout"] * self.rate
-        if self.armed and self.session_token is not None and \
-                self.tick - self.last_heard_tick > timeout_ticks:
-            self._safe_state()
-            self.fault = self.faults["WATCHDOG"]
-            self.watchdog_expired = True
-            self._emit("CRITICAL", "WATCHDOG_EXPIRED",
-                       f"no heartbeat for {self.params['watchdog_timeout']} s: motors off")
-        played = 0                       # 1-based index of the profile sample this period
-        if self.armed and self.profile_active:
-            played = self.profile_pos + 1
-        i1, i2 = self._currents()
-        sat = (abs(i1) >= self.plant.i_max[0], abs(i2) >= self.plant.i_max[1])
-        meas = self.plant.step(i1, i2, 1.0 / self.rate)
-        if self.armed and abs(meas["encoder_outer"]) > self.params["travel_limit"]:
-            self._safe_state()
-            self.fault = self.faults["OVER_TRAVEL"]
-            self._emit("ERROR", "FAULT", "outer axis beyond the travel limit: motors off")
-        status = {"armed": self.armed, "coarse_saturated": sat[0], "fine_saturated": sat[1],
-                  "profile_active": played > 0,
-                  "friction_comp_on": self.friction_comp, "fault": self.fault != 0}
-        err = self.reference - meas["encoder_inner"] if self.mode in (
-            self.modes["RELATIVE"], self.modes["INERTIAL"]) else 0.0
-        return {"mode": self.mode, **status, **meas, "reference": self.reference,
-                "error_angle": err, "error_rate": 0.0,
-                "torque_coarse_cmd": i1 * self.plant.kt[0], "torque_fine_cmd": i2 * self.plant.kt[1],
-                "friction_comp_torque": 0.0,
-                "profile_index": played}
+    _EVENT_TEXT = {
+        core.EV_WATCHDOG: ("CRITICAL", "WATCHDOG_EXPIRED", "no heartbeat for {wd} s: motors off, disarmed, idle"),
+        core.EV_OVER_TRAVEL: ("ERROR", "FAULT", "outer axis beyond the travel limit: motors off"),
+        core.EV_FLEXURE: ("ERROR", "FAULT", "flexure deflection beyond its safe range: motors off"),
+        core.EV_PROFILE_DONE: ("INFO", "PROFILE_FINISHED", "profile finished"),
+    }
 
-    def _currents(self) -> tuple[float, float]:
-        if not self.armed:
-            return 0.0, 0.0
-        if self.profile_active and self.profile is not None:
-            samples = self.profile["samples"]
-            value = samples[self.profile_pos]
-            self.profile_pos += 1
-            if self.profile_pos >= len(samples):
-                self.profile_active = False
-                self._emit("INFO", "PROFILE_FINISHED", "profile finished")
-            target = self.profile["target"]
-            targets = self.d.command("PROFILE_BEGIN").args[1].states
-            if target == targets["CURRENT_COARSE"]:
-                self.current_cmd = (value, self.current_cmd[1])
-            elif target == targets["CURRENT_FINE"]:
-                self.current_cmd = (self.current_cmd[0], value)
-            else:
-                self.reference = value
-        if self.mode == self.modes["OPEN_LOOP"]:
-            return self.current_cmd
-        # Interim position loop (PD on the encoder) until uploaded controllers run here.
-        e = self.reference - self.plant.angle
-        u = 400.0 * e - 8.0 * self.plant.rate
-        i1 = max(-self.plant.i_max[0], min(self.plant.i_max[0], u / self.plant.kt[0]))
-        return i1, 0.0
+    def run(self, n: int, v_fg: np.ndarray | None = None) -> tuple[dict[str, Any], np.ndarray]:
+        """n control periods -> HIGH_RATE columns (engineering units) and the truth array."""
+        cols, truth, events = self.engine.run(n, v_fg)
+        for tick, code in events:
+            level, name, text = self._EVENT_TEXT[code]
+            if code == core.EV_WATCHDOG:
+                self.watchdog_expired = True
+            if code in (core.EV_WATCHDOG, core.EV_OVER_TRAVEL, core.EV_FLEXURE):
+                self._emit("INFO", "DISARMED", f"drives disabled at tick {tick}")
+            self._emit(level, name, text.format(wd=self.params["watchdog_timeout"]) + f" (tick {tick})")
+        return cols, truth
 
     def housekeeping(self) -> dict[str, Any]:
-        age_ms = (self.tick - self.last_heard_tick) * 1000.0 / self.rate
+        age_ms = (self.tick - self.fw[core.FW_LAST_HEARD]) * 1000.0 / self.rate
+        current = abs(self.fw[core.FW_I1])
         return {
-            "temp_motor_coarse": 25.0 + 0.5 * abs(self.current_cmd[0]),
+            "temp_motor_coarse": 25.0 + 0.5 * current,
             "temp_motor_fine": 25.0, "temp_flexure": 27.0, "temp_electronics": 35.0,
             "supply_motor": 28.0, "supply_logic": 5.0,
             "firmware_version": FIRMWARE_VERSION, "uptime": int(self.tick / self.rate),
