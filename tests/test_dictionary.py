@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 import shutil
 from pathlib import Path
 
@@ -32,13 +33,19 @@ def proto_copy(tmp_path: Path) -> Path:
     return tmp_path
 
 
-def edit(directory: Path, filename: str, old: str, new: str, count: int = 1) -> None:
-    """Replace `old` by `new` in one protocol file; `old` must occur exactly `count` times
-    (so a test cannot silently pass because its edit matched nothing)."""
+def edit(directory: Path, filename: str, old: str | re.Pattern, new: str) -> None:
+    """Replace `old` (text, or a regular expression) by `new` in one protocol file; it
+    must match exactly once, so a test cannot silently pass because its edit matched
+    nothing."""
     path = directory / filename
     text = path.read_text(encoding="utf-8")
-    assert text.count(old) == count, f"{old!r} occurs {text.count(old)} times in {filename}"
-    path.write_text(text.replace(old, new), encoding="utf-8")
+    if isinstance(old, re.Pattern):
+        text, n = old.subn(new, text)
+    else:
+        n = text.count(old)
+        text = text.replace(old, new)
+    assert n == 1, f"{old!r} matches {n} times in {filename}"
+    path.write_text(text, encoding="utf-8")
 
 
 def load_error(directory: Path) -> str:
@@ -250,12 +257,9 @@ BROKEN = {
     "reserved_channel_name": (
         "telemetry.toml", '{ name = "uptime"', '{ name = "tick"',
         ["HOUSEKEEPING", "tick"]),
-    "str_item_not_last": (
+    "str_item_not_last": (       # swap EVENT's code and text lines
         "telemetry.toml",
-        '  { name = "code", type = "u16", description = "Event code (see [event_codes] in commands.toml)" },\n'
-        '  { name = "text", type = "str", description = "Human-readable message, UTF-8" },\n',
-        '  { name = "text", type = "str", description = "Human-readable message, UTF-8" },\n'
-        '  { name = "code", type = "u16", description = "Event code (see [event_codes] in commands.toml)" },\n',
+        re.compile(r'(?m)^(\s*\{ name = "code",.*\n)(\s*\{ name = "text",.*\n)'), r"\2\1",
         ["EVENT", "text", "last"]),
     "yellow_outside_red": (
         "telemetry.toml", "limits = { yellow = [15.0, 40.0], red = [5.0, 50.0] }",
@@ -278,9 +282,8 @@ BROKEN = {
         "telemetry.toml", "fault = 5 }", "fault = 8 }",
         ["HIGH_RATE", "status", "fault"]),
     "zero_scale": (
-        "telemetry.toml", 'scale = 1.0e-3, description = "VCM set terminal voltage"',
-        'scale = 0.0, description = "VCM set terminal voltage"',
-        ["HIGH_RATE", "voltage_fine", "scale"]),
+        "telemetry.toml", re.compile(r'(name = "voltage_fine",.*?)scale = [^,]+,'),
+        r"\1scale = 0.0,", ["HIGH_RATE", "voltage_fine", "scale"]),
     "packet_id_out_of_range": (
         "telemetry.toml", 'name = "EVENT"\nid = 0x03', 'name = "EVENT"\nid = 0x100',
         ["EVENT", "256"]),
@@ -293,12 +296,10 @@ BROKEN = {
     "command_arg_unknown_type": (
         "commands.toml", '{ name = "enable", type = "u8"', '{ name = "enable", type = "bool"',
         ["FRICTION_COMP", "enable", "bool"]),
-    "command_bytes_not_last": (
+    "command_bytes_not_last": (  # swap PARAM_WRITE's offset and data lines
         "commands.toml",
-        '{ name = "offset", type = "u32", units = "bytes", description = "Byte offset in the table" },\n'
-        '  { name = "data", type = "bytes", description = "Table bytes (at most max_payload_bytes - 16)" },',
-        '{ name = "data", type = "bytes", description = "Table bytes (at most max_payload_bytes - 16)" },\n'
-        '  { name = "offset", type = "u32", units = "bytes", description = "Byte offset in the table" },',
+        re.compile(r'(?m)(name = "PARAM_WRITE"\n(?:.*\n)*?)^(\s*\{ name = "offset",.*\n)'
+                   r'(\s*\{ name = "data",.*\n)'), r"\1\3\2",
         ["PARAM_WRITE", "data", "last"]),
     "parameter_default_out_of_range": (
         "parameters.toml", "range = [0.0, 16.1]\ndefault = 16.1", "range = [0.0, 16.1]\ndefault = 17.0",

@@ -23,6 +23,7 @@ from ..dictionary import CommandDef, Dictionary
 from ..errors import GroundStationError
 from ..params import table as ptable
 from . import core
+from . import friction as fr
 from .engine import Engine
 from .testbed import Testbed, load_testbed
 
@@ -421,7 +422,15 @@ class Firmware:
 
     def run(self, n: int, v_fg: np.ndarray | None = None) -> tuple[dict[str, Any], np.ndarray]:
         """n control periods -> HIGH_RATE columns (engineering units) and the truth array."""
+        plant_overflows = self.engine.fstate[fr.S_OVERFLOW]
+        comp_overflows = self.engine.cstate[fr.S_OVERFLOW]
         cols, truth, events = self.engine.run(n, v_fg)
+        if self.engine.fstate[fr.S_OVERFLOW] > plant_overflows:
+            self._emit("WARNING", "SIMULATOR", "bearing friction model: reversal stack overflowed "
+                       "and was reset (more nested reversals than its capacity)")
+        if self.engine.cstate[fr.S_OVERFLOW] > comp_overflows:
+            self._emit("WARNING", "FRICTION_COMP_RESET", "friction compensation: reversal stack "
+                       "overflowed and was reset")
         for tick, code in events:
             level, name, text = self._EVENT_TEXT[code]
             if code == core.EV_WATCHDOG:

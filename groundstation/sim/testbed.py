@@ -24,6 +24,8 @@ DEFAULT_TESTBED = TESTBEDS_DIR / "relative_2dof.toml"
 class TestbedConfigError(GroundStationError):
     """A testbed file is missing, malformed, or has a bad value (names file and field)."""
 
+    __test__ = False        # a name starting with "Test" that pytest must not collect
+
 
 INF = math.inf
 # section -> key -> (type, min, max, units); min/max inclusive.  Types: "float", "int",
@@ -78,6 +80,8 @@ FRICTION_MODELS = ("SFM", "DHM", "DB-SFM", "DB-DHM", "viscous")
 @dataclass(frozen=True)
 class Testbed:
     """A checked testbed configuration; sections are plain dicts of SI-or-rig units."""
+
+    __test__ = False
 
     path: Path
     name: str
