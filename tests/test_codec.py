@@ -68,8 +68,10 @@ def collect(blocks) -> dict[str, list[tuple]]:
 
 def all_frames(blocks) -> list[bytes]:
     """Frames of all blocks, block after block (so grouped by packet within one read)."""
-    return [
-        f for b in blocks for f in ([r.tobytes() for r in b.raw] if b.raw is not None else b.frames)]
+    out: list[bytes] = []
+    for b in blocks:
+        out += [r.tobytes() for r in b.raw] if b.raw is not None else list(b.frames)
+    return out
 
 
 def feed_chunks(deframer: StreamDeframer, data: bytes, cuts) -> list:

@@ -316,4 +316,6 @@ class SimulatedDevice:
                 self.run_ticks(120)
                 continue
             self._catch_up()
-            time.sleep(0.001)
+            # sleep to the next control period's start, so frames leave on time
+            next_due = self._t0 + (self._ticks_done + 1) / self.dictionary.control_rate_hz
+            time.sleep(max(0.0002, next_due - time.monotonic()))
