@@ -108,31 +108,39 @@ class FrameCodec:
                 if flag in values:
                     flags = np.asarray(values[flag]).astype(np.int64) & 1
                     rec[item.name] = rec[item.name].astype(np.int64) | (flags << bit)
-        body = rec.view(np.uint8).reshape(n, -1)
-        size = body.shape[1]
-        data = bytearray(body.tobytes())
-        mv = memoryview(data)
-        # zlib per frame: encoding is done at 1200 frames/s by the device, and in bulk only
-        # by tests and benchmarks, so the simple loop is fast enough here.
-        for i in range(n):
-            off = i * size
-            mv[off + size - CRC_SIZE:off + size] = crc_bytes(mv[off:off + size - CRC_SIZE])
-        return bytes(data)
+        size = rec.dtype.itemsize
+        covered = size - CRC_SIZE
+        mv = memoryview(rec.view(np.uint8).reshape(-1))
+        # one zlib call per frame: no library computes many CRCs at once, and this loop
+        # costs ~0.3 us a frame, small beside the 833 us between frames on the link
+        crc32 = zlib.crc32
+        rec["crc"] = np.fromiter((crc32(mv[off:off + covered]) for off in range(0, n * size, size)),
+                                 dtype=np.uint32, count=n)
+        return rec.tobytes()
 
     def _checked(self, pkt: PacketDef, item: Item, raw: np.ndarray) -> np.ndarray:
         dt = item.wire_dtype
         if dt.kind in "iu":
             raw = np.asarray(raw)
-            if raw.size and raw.dtype.kind == "f" and not np.all(np.isfinite(raw)):
+            if not raw.size:
+                return raw
+            lo, hi = raw.min(), raw.max()            # NaN and inf show up in min/max
+            if raw.dtype.kind == "f" and not (np.isfinite(lo) and np.isfinite(hi)):
                 raise EncodeError(f"{pkt.name}.{item.name}: non-finite value for an integer field")
             info = np.iinfo(dt)
-            if raw.size and (np.min(raw) < info.min or np.max(raw) > info.max):
+            if lo < info.min or hi > info.max:
                 raise EncodeError(
                     f"{pkt.name}.{item.name}: value outside the wire range of {item.type} "
                     f"({info.min}..{info.max} counts)")
         elif dt.kind == "f":
             raw = np.asarray(raw, dtype=np.float64)
-            if raw.size and np.any(np.abs(raw[np.isfinite(raw)]) > float(np.finfo(dt).max)):
+            if not raw.size:
+                return raw
+            peak = np.abs(raw).max()
+            if not np.isfinite(peak):                # inf/NaN pass; look at the finite rest
+                finite = np.abs(raw[np.isfinite(raw)])
+                peak = finite.max() if finite.size else 0.0
+            if peak > float(np.finfo(dt).max):
                 raise EncodeError(
                     f"{pkt.name}.{item.name}: value outside the range of {item.type} "
                     f"(+-{float(np.finfo(dt).max):.4g})")
