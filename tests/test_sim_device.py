@@ -151,5 +151,5 @@ def test_friction_stack_overflow_is_reported(tmp_path, dictionary):
     op.profile(samples, "CURRENT_COARSE")
     op("PROFILE_START")
     keep_alive(fw, op, len(samples))
-    texts = [t for _, code, t in fw.events if code == dictionary.event_codes["SIMULATOR"]]
+    texts = [t for _, code, t, _ in fw.events if code == dictionary.event_codes["SIMULATOR"]]
     assert any("stack overflowed" in t for t in texts)

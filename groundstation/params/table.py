@@ -100,6 +100,8 @@ def _slope_table_problems(values: Mapping[str, Any]) -> list[str]:
         out.append("friction_comp_table_x must be strictly increasing")
     if np.any(np.diff(y) > 0):
         out.append("friction_comp_table_slope must not increase with x")
+    if len(y) and not y[0] > 0:
+        out.append("friction_comp_table_slope must be positive at x = 0")
     return out
 
 

@@ -25,8 +25,8 @@ from .friction import friction_step
 FW_MODE, FW_ARMED, FW_FAULT, FW_COMP_ON, FW_REF, FW_I1, FW_I2 = 0, 1, 2, 3, 4, 5, 6
 FW_PROF_ACTIVE, FW_PROF_POS, FW_PROF_TARGET, FW_LAST_HEARD, FW_TICK = 7, 8, 9, 10, 11
 FW_LOS_EST, FW_PREV_ENC, FW_KP, FW_SAT1, FW_SAT2, FW_WD_TICKS, FW_SESSION = 12, 13, 14, 15, 16, 17, 18
-FW_RATE_REF, FW_TRAVEL, FW_T_DAHL, FW_COMP_TORQUE, FW_ENC_INIT = 19, 20, 21, 22, 23
-FW_SIZE = 24
+FW_RATE_REF, FW_TRAVEL, FW_T_DAHL, FW_COMP_TORQUE, FW_ENC_INIT, FW_ENC_INNER = 19, 20, 21, 22, 23, 24
+FW_SIZE = 25
 
 MODE_IDLE, MODE_OPEN_LOOP, MODE_RELATIVE, MODE_INERTIAL = 0, 1, 2, 3
 TARGET_REFERENCE, TARGET_RATE_REFERENCE, TARGET_CURRENT_COARSE, TARGET_CURRENT_FINE = 0, 1, 2, 3
@@ -110,6 +110,7 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
         else:
             enc_inner = enc_outer
         enc_base = _quantise(thb, k[K_BASE_LSB])
+        fw[FW_ENC_INNER] = enc_inner
         gyro = 0.0
         ac = 0.0
         if inertial:
@@ -187,7 +188,7 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
                 v = sos_run(sos[base], zs[base], zs_new[base], e)
                 u1 = sos_run(sos[base + 1], zs[base + 1], zs_new[base + 1], v)
                 u2 = sos_run(sos[base + 2], zs[base + 2], zs_new[base + 2], v)
-            if fw[FW_COMP_ON] > 0.5:
+            if closed and fw[FW_COMP_ON] > 0.5:     # a feedback-controller feature only
                 u1 += t_comp
         if not two_dof:
             u2 = 0.0
@@ -243,7 +244,7 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
         out[t, 19] = i2
         out[t, 20] = k[K_R1] * i1 + k[K_KE1] * (x[1] - x[5])
         out[t, 21] = k[K_R2] * i2 + k[K_KE2] * (x[3] - x[1]) if two_dof else 0.0
-        out[t, 22] = t_comp if (armed and fw[FW_COMP_ON] > 0.5) else 0.0
+        out[t, 22] = t_comp if (closed and fw[FW_COMP_ON] > 0.5) else 0.0
         out[t, 23] = played
         truth[t, 0] = th1
         truth[t, 1] = th2

@@ -184,10 +184,11 @@ class SimulatedDevice:
         except LinkLostError:
             pass
 
-    def _frame(self, packet: str, values: dict[str, Any]) -> bytes:
+    def _frame(self, packet: str, values: dict[str, Any], tick: int | None = None) -> bytes:
         seq = self._seq[packet]
         self._seq[packet] = (seq + 1) & 0xFFFFFFFF
-        return self.codec.encode_variable(packet, values, seq, self.firmware.tick)
+        return self.codec.encode_variable(packet, values, seq,
+                                          self.firmware.tick if tick is None else tick)
 
     # ------------------------------------------------------------------ telemetry
     def _telemetry_target(self) -> tuple[Any, ...] | None:
@@ -230,8 +231,8 @@ class SimulatedDevice:
         fw = self.firmware
         frames = []
         while fw.events:
-            level, code, text = fw.events.popleft()
-            frames.append(self._frame("EVENT", {"level": level, "code": code, "text": text[:900]}))
+            level, code, text, tick = fw.events.popleft()
+            frames.append(self._frame("EVENT", {"level": level, "code": code, "text": text[:900]}, tick))
         return frames
 
     def _flush_events(self) -> None:

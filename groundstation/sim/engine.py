@@ -84,6 +84,9 @@ class Engine:
         self.profile = np.zeros(1)
         self.events = np.zeros((32, 2))
         self.apply_parameters(params)
+        # compile (or load from numba's cache) now, not in the first control period:
+        # a device must answer its first command within the protocol's timeouts
+        self.run(0)
 
     # ------------------------------------------------------------------ configuration
     def apply_parameters(self, p: dict[str, Any]) -> None:

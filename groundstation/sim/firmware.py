@@ -124,9 +124,14 @@ class Firmware:
         v = FIRMWARE_VERSION
         return f"{v >> 16}.{(v >> 8) & 0xFF}.{v & 0xFF}"
 
-    def _emit(self, level: str, code: str, text: str) -> None:
+    def _emit(self, level: str, code: str, text: str, tick: int | None = None) -> None:
+        """Queue an EVENT; `tick` is when it happened (default: now)."""
         levels = self.d.packet("EVENT").item_by_name["level"].states
-        self.events.append((levels[level], self.ev[code], text))
+        self.events.append((levels[level], self.ev[code], text, self.tick if tick is None else tick))
+
+    def _mode_changed(self, tick: int | None = None) -> None:
+        name = {val: k for k, val in self.modes.items()}[self.mode]
+        self._emit("INFO", "MODE_CHANGED", f"mode {name}", tick)
 
     def _reason(self, name: str) -> int:
         return self.err[name]
@@ -167,6 +172,8 @@ class Firmware:
             values = decode_items(cmd.args, args, cmd.name)
         except GroundStationError:
             return [Stage(REJECTED, self._reason("BAD_LENGTH"))]
+        if cmd.name == "PROFILE_WRITE" and len(values["samples"]) % 4:
+            return [Stage(REJECTED, self._reason("BAD_LENGTH"))]    # whole f32 samples only
         if cmd.needs_session and (self.session_token is None or token != self.session_token):
             self._emit("WARNING", "COMMAND_REJECTED", f"{cmd.name} without the session token")
             return [Stage(REJECTED, self._reason("NOT_SESSION_OWNER"))]
@@ -243,13 +250,12 @@ class Firmware:
     def _cmd_set_mode(self, v, peer):
         target = v["mode"]
         if target == self.modes["IDLE"]:
-            self._safe_state()
+            self._safe_state()                 # emits MODE_CHANGED if it was not idle
         elif self.armed:
             return self._reject("INVALID_STATE")
         if target != self.mode:
             self.mode = target
-            name = {val: k for k, val in self.modes.items()}[target]
-            self._emit("INFO", "MODE_CHANGED", f"mode {name}")
+            self._mode_changed()
         return self._ok()
 
     def _cmd_arm(self, v, peer):
@@ -261,7 +267,9 @@ class Firmware:
             fw = self.fw
             fw[core.FW_ARMED] = 1.0
             fw[core.FW_I1] = fw[core.FW_I2] = fw[core.FW_RATE_REF] = 0.0
-            fw[core.FW_REF] = fw[core.FW_LOS_EST]      # hold where the axis is
+            # hold where the axis is, in the quantity the mode controls
+            fw[core.FW_REF] = fw[core.FW_ENC_INNER] if self.mode == self.modes["RELATIVE"] \
+                else fw[core.FW_LOS_EST]
             self.engine.reset_controllers()
             self._emit("INFO", "ARMED", "drives enabled")
         return self._ok()
@@ -329,6 +337,7 @@ class Firmware:
         # activation happens here, between two step() calls: a control-cycle boundary
         self.params, self.param_blob = values, blob
         self.engine.apply_parameters(values)
+        self.fw[core.FW_COMP_ON] = float(values["friction_comp_enabled"])
         self.param_crc, self.param_version = zlib.crc32(blob), st.meta["version"]
         del self._staging["param"]
         self._emit("INFO", "PARAMETERS_ACTIVATED",
@@ -350,14 +359,14 @@ class Firmware:
         return self._ok()
 
     def _cmd_profile_write(self, v, peer):
-        if len(v["samples"]) % 4:
-            return self._reject("BAD_LENGTH")      # whole f32 samples only
         return self._write_block("profile", 4 * v["offset"], v["samples"])
 
     def _cmd_profile_commit(self, v, peer):
         st = self._staging.get("profile")
         if st is None:
             return self._reject("NOTHING_STAGED")
+        if self.profile_active:
+            return self._reject("INVALID_STATE")     # never swap samples under playback
         if zlib.crc32(bytes(st.buffer)) != v["profile_crc"]:
             return [Stage(ACCEPTED), Stage(FAILED, self._reason("CRC_MISMATCH"))]
         samples = np.frombuffer(bytes(st.buffer), ">f4").astype(np.float64)
@@ -408,10 +417,11 @@ class Firmware:
         fw[core.FW_ARMED] = 0.0
         fw[core.FW_I1] = fw[core.FW_I2] = 0.0
         fw[core.FW_PROF_ACTIVE] = 0.0
-        if not keep_mode:
-            fw[core.FW_MODE] = self.modes["IDLE"]
         if was_armed:
             self._emit("INFO", "DISARMED", "drives disabled, motors at zero")
+        if not keep_mode and self.mode != self.modes["IDLE"]:
+            fw[core.FW_MODE] = self.modes["IDLE"]
+            self._mode_changed()
 
     _EVENT_TEXT = {
         core.EV_WATCHDOG: ("CRITICAL", "WATCHDOG_EXPIRED", "no heartbeat for {wd} s: motors off, disarmed, idle"),
@@ -435,9 +445,10 @@ class Firmware:
             level, name, text = self._EVENT_TEXT[code]
             if code == core.EV_WATCHDOG:
                 self.watchdog_expired = True
+            self._emit(level, name, text.format(wd=self.params["watchdog_timeout"]), tick)
             if code in (core.EV_WATCHDOG, core.EV_OVER_TRAVEL, core.EV_FLEXURE):
-                self._emit("INFO", "DISARMED", f"drives disabled at tick {tick}")
-            self._emit(level, name, text.format(wd=self.params["watchdog_timeout"]) + f" (tick {tick})")
+                self._emit("INFO", "DISARMED", "drives disabled, motors at zero", tick)
+                self._emit("INFO", "MODE_CHANGED", "mode IDLE", tick)
         return cols, truth
 
     def housekeeping(self) -> dict[str, Any]:
