@@ -166,6 +166,10 @@ class UdpReceiver:
                             f"({exc.strerror or exc})") from None
         self.host, self.port = self._sock.getsockname()
         self.receive_buffer = self._sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        if self.receive_buffer < buffer_bytes // 2:      # Linux reports twice what it grants
+            log.warning("UDP receive buffer is %d bytes, %d requested: raise the limit with "
+                        "'sysctl -w net.core.rmem_max=%d' to ride out pauses without drops",
+                        self.receive_buffer, buffer_bytes, buffer_bytes)
         self.datagrams = 0
         self.bytes_read = 0
         self.closed = False

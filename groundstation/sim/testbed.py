@@ -66,7 +66,6 @@ SCHEMA: dict[str, dict[str, tuple]] = {
         "gyro_bias_stability": ("float", 0.0, 1e4, "deg/h"),
         "autocollimator_bits": ("int", 8, 32, "bits"), "autocollimator_range": ("float", 1e-4, 45.0, "deg"),
         "autocollimator_noise": ("float", 0.0, 1e-3, "rad"),
-        "complementary_crossover": ("float", 0.01, 50.0, "Hz"),
     },
     "base_stage": {"enabled": ("bool", None, None, ""), "amplifier_gain": ("float", 0.0, 1e3, "V/V"),
                    "actuator_gain": ("float", 0.0, 10.0, "rad/V"),
