@@ -72,6 +72,15 @@ def _quantise(value, lsb):
 
 
 @njit(cache=True)
+def _record(events, n_ev, tick, code):
+    """Append (tick, code) to the batch's event list if there is room; new count."""
+    if n_ev < events.shape[0]:
+        events[n_ev, 0], events[n_ev, 1] = tick, code
+        return n_ev + 1
+    return n_ev
+
+
+@njit(cache=True)
 def _safe_state(fw):
     fw[FW_ARMED] = 0.0
     fw[FW_I1] = 0.0
@@ -135,9 +144,7 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
         if armed and fw[FW_SESSION] > 0.5 and tick - fw[FW_LAST_HEARD] > fw[FW_WD_TICKS]:
             _safe_state(fw)
             fw[FW_FAULT] = FAULT_WATCHDOG
-            if n_ev < events.shape[0]:
-                events[n_ev, 0], events[n_ev, 1] = tick, EV_WATCHDOG
-                n_ev += 1
+            n_ev = _record(events, n_ev, tick, EV_WATCHDOG)
             armed = False
         played = 0.0
         if armed and fw[FW_PROF_ACTIVE] > 0.5:
@@ -156,9 +163,7 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
                 fw[FW_I2] = sample
             if pos + 1 >= profile.shape[0]:
                 fw[FW_PROF_ACTIVE] = 0.0
-                if n_ev < events.shape[0]:
-                    events[n_ev, 0], events[n_ev, 1] = tick, EV_PROFILE_DONE
-                    n_ev += 1
+                n_ev = _record(events, n_ev, tick, EV_PROFILE_DONE)
         # ---- 3. control law (the compensator tracks the bearing even when disarmed)
         dphi_meas = enc_outer - fw[FW_PREV_ENC] if fw[FW_ENC_INIT] > 0.5 else 0.0
         fw[FW_PREV_ENC] = enc_outer
@@ -205,20 +210,16 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
             for f in range(base, base + 3):
                 zs[f, :, :] = zs_new[f, :, :]
         # ---- faults that stop the motors in this very period
+        fault, code = FAULT_NONE, 0
         if armed and abs(enc_outer) > fw[FW_TRAVEL]:
-            _safe_state(fw)
-            fw[FW_FAULT] = FAULT_OVER_TRAVEL
-            u1 = u2 = 0.0
-            if n_ev < events.shape[0]:
-                events[n_ev, 0], events[n_ev, 1] = tick, EV_OVER_TRAVEL
-                n_ev += 1
+            fault, code = FAULT_OVER_TRAVEL, EV_OVER_TRAVEL
         elif armed and two_dof and abs(enc_inner - enc_outer) > k[K_FLEX_SAFE]:
+            fault, code = FAULT_FLEXURE, EV_FLEXURE
+        if fault != FAULT_NONE:
             _safe_state(fw)
-            fw[FW_FAULT] = FAULT_FLEXURE
+            fw[FW_FAULT] = fault
             u1 = u2 = 0.0
-            if n_ev < events.shape[0]:
-                events[n_ev, 0], events[n_ev, 1] = tick, EV_FLEXURE
-                n_ev += 1
+            n_ev = _record(events, n_ev, tick, code)
         i1 = u1 / k[K_KT1]
         i2 = u2 / k[K_KT2]
         # ---- outputs (sampled values, commands of this period)
