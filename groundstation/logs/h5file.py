@@ -1,0 +1,280 @@
+"""The low-level log file: creates the layout of schema.py and appends to it.
+
+No threads and no queue here (the Recorder adds those): this is a plain object a test
+or a script can drive directly.  Every dataset is created up front, then SWMR mode is
+switched on; from then on data are only appended, and flush() makes them visible to
+readers and durable against a crash of this process.
+"""
+
+from __future__ import annotations
+
+import getpass
+import json
+import socket
+import time
+import uuid
+from collections import defaultdict
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from .. import __version__
+from ..codec import TelemetryBlock
+from ..dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, Item, PacketDef
+from ..link.stats import TickUnwrapper
+from . import schema
+
+
+def _text_dataset(group: h5py.Group, name: str, text: str) -> None:
+    data = text.encode("utf-8")
+    group.create_dataset(name, data=np.array(data, dtype=f"S{max(1, len(data))}"))
+
+
+def _appendable(group: h5py.Group, name: str, dtype, row_shape: tuple = (), chunk_rows=None):
+    chunk_rows = chunk_rows or schema.CHUNK_ROWS
+    row_bytes = int(np.prod(row_shape, dtype=np.int64)) * np.dtype(dtype).itemsize if row_shape else np.dtype(dtype).itemsize
+    if row_shape:   # keep chunks near 0.5 MB for wide rows (raw frames)
+        chunk_rows = max(64, min(chunk_rows, (512 * 1024) // max(1, row_bytes)))
+    return group.create_dataset(name, shape=(0, *row_shape), maxshape=(None, *row_shape),
+                                dtype=dtype, chunks=(chunk_rows, *row_shape), **schema.COMPRESSION)
+
+
+def _stream(group: h5py.Group, name: str) -> h5py.Group:
+    g = group.create_group(name)
+    g.create_dataset("data", shape=(0,), maxshape=(None,), dtype=np.uint8,
+                     chunks=(schema.STREAM_CHUNK,), **schema.COMPRESSION)
+    _appendable(g, "offset", np.uint64)
+    _appendable(g, "length", np.uint32)
+    g.attrs["layout"] = "stream: record i is data[offset[i] : offset[i] + length[i]]"
+    return g
+
+
+def _append(ds: h5py.Dataset, values: np.ndarray) -> None:
+    n = len(values)
+    if not n:
+        return
+    start = ds.shape[0]
+    ds.resize((start + n, *ds.shape[1:]))
+    ds[start:start + n] = values
+
+
+def _append_stream(g: h5py.Group, records: list[bytes]) -> None:
+    if not records:
+        return
+    data = g["data"]
+    start = data.shape[0]
+    lengths = np.fromiter((len(r) for r in records), dtype=np.uint32, count=len(records))
+    offsets = start + np.concatenate(([0], np.cumsum(lengths[:-1], dtype=np.uint64))).astype(np.uint64)
+    _append(data, np.frombuffer(b"".join(records), dtype=np.uint8))
+    _append(g["offset"], offsets)
+    _append(g["length"], lengths)
+
+
+def _item_attrs(ds: h5py.Dataset, item: Item) -> None:
+    ds.attrs["units"] = item.units
+    ds.attrs["description"] = item.description
+    ds.attrs["wire_type"] = item.type
+    if item.polynomial is not None:
+        ds.attrs["conversion"] = json.dumps({"polynomial": list(item.polynomial)})
+    elif item.scale is not None:
+        ds.attrs["conversion"] = json.dumps({"scale": item.scale, "offset": item.offset})
+    if item.states:
+        ds.attrs["states"] = json.dumps(item.states)
+    if item.limits is not None:
+        ds.attrs["limits"] = json.dumps({"yellow": item.limits.yellow, "red": item.limits.red})
+
+
+class LogFile:
+    """One HDF5 recording: create(), append(), journal(), flush(), close()."""
+
+    def __init__(self, path: Path, dictionary: Dictionary, *, test_name: str = "", run: int = 1,
+                 notes: str = "", testbed_text: str = "", testbed_name: str = "",
+                 testbed_path: str = ""):
+        self.path = Path(path)
+        self.d = dictionary
+        self.frames_written = 0
+        self.last_host_time: float | None = None
+        self._unwrap: dict[str, TickUnwrapper] = defaultdict(TickUnwrapper)
+        f = h5py.File(self.path, "w", libver=schema.LIBVER)
+        self.f = f
+        try:
+            self._create(test_name, run, notes, testbed_text, testbed_name, testbed_path)
+            f.swmr_mode = True
+        except BaseException:
+            f.close()
+            raise
+        self.created = time.time()
+
+    # ------------------------------------------------------------------ layout
+    def _create(self, test_name, run, notes, testbed_text, testbed_name, testbed_path) -> None:
+        f, d = self.f, self.d
+        a = f.attrs
+        a["schema"] = schema.SCHEMA
+        a["schema_version"] = schema.SCHEMA_VERSION
+        a["uuid"] = str(uuid.uuid4())
+        a["created_utc"] = datetime.now(timezone.utc).isoformat()
+        a["software_version"] = __version__
+        a["host"] = socket.gethostname()
+        try:
+            a["user"] = getpass.getuser()
+        except (KeyError, OSError):
+            a["user"] = ""
+        a["test_name"] = test_name
+        a["run"] = run
+        a["notes"] = notes
+        a["protocol_version"] = d.version
+        a["dictionary_hash"] = f"{d.hash:08x}"
+        a["tick_rate_hz"] = d.control_rate_hz
+        a["clean_close"] = False
+        proto = f.create_group("protocol")
+        for name, text in d.source_texts.items():
+            _text_dataset(proto, name, text)
+        tb = f.create_group("testbed")
+        tb.attrs["name"] = testbed_name
+        tb.attrs["path"] = testbed_path
+        _text_dataset(tb, "config", testbed_text or "")
+        tel = f.create_group("telemetry")
+        frames = f.create_group("frames")
+        for pkt in d.packets:
+            if pkt.direction != "device_to_host":
+                continue
+            self._create_packet(tel.create_group(pkt.name), pkt)
+            fg = frames.create_group(pkt.name)
+            if pkt.variable_item is None:
+                _appendable(fg, "data", np.uint8, (pkt.fixed_payload_size + HEADER_SIZE + CRC_SIZE,))
+                fg.attrs["layout"] = "fixed: one row per frame, header to CRC"
+            else:
+                _stream(fg, "stream")
+                fg.attrs["layout"] = "stream: frames in the 'stream' byte stream"
+            _appendable(fg, "host_time", np.float64)
+        j = f.create_group("journal")
+        j.attrs["kinds"] = json.dumps(list(schema.JOURNAL_KINDS))
+        j.attrs["description"] = ("one row per record: time (host s), kind (index into "
+                                  "'kinds'), JSON text and an optional binary blob")
+        _appendable(j, "time", np.float64, chunk_rows=1024)
+        _appendable(j, "kind", np.uint8, chunk_rows=1024)
+        _stream(j, "text")
+        _stream(j, "blob")
+
+    def _create_packet(self, g: h5py.Group, pkt: PacketDef) -> None:
+        g.attrs["id"] = pkt.id
+        g.attrs["description"] = pkt.description
+        g.attrs["rate_hz"] = pkt.rate_hz or 0.0
+        for name, dt, units, desc in (
+                ("sequence", np.uint32, "counts", "per-packet sequence number (gaps = frames lost)"),
+                ("tick", np.uint32, "ticks", "device tick (1200 Hz) as on the wire"),
+                ("device_time", np.float64, "s", "unwrapped device tick / tick rate: device time since boot"),
+                ("host_time", np.float64, "s", "host arrival time, seconds since the Unix epoch")):
+            ds = _appendable(g, name, dt)
+            ds.attrs["units"], ds.attrs["description"] = units, desc
+        raw = g.create_group("raw")
+        for item in pkt.items:
+            if item.is_variable:
+                s = _stream(g, item.name)
+                s.attrs["encoding"] = "utf-8" if item.type == "str" else "binary"
+                s.attrs["description"] = item.description
+                continue
+            dt = np.float64 if item.has_conversion else item.wire_dtype.newbyteorder("=")
+            _item_attrs(_appendable(g, item.name, dt), item)
+            if item.has_conversion:
+                r = _appendable(raw, item.name, item.wire_dtype.newbyteorder("="))
+                r.attrs["units"] = "counts"
+                r.attrs["description"] = f"wire counts of {item.name}"
+            for flag, bit in item.bits.items():
+                ds = _appendable(g, flag, np.bool_)
+                ds.attrs["description"] = f"bit {bit} of {item.name}"
+                ds.attrs["units"] = ""
+
+    # ------------------------------------------------------------------ appending
+    def append(self, blocks: list[TelemetryBlock]) -> None:
+        """Append blocks (any packets, arrival order) - one write per dataset per packet."""
+        by_packet: dict[str, list[TelemetryBlock]] = defaultdict(list)
+        for b in blocks:
+            if len(b):
+                by_packet[b.name].append(b)
+        tel, frames = self.f["telemetry"], self.f["frames"]
+        for name, group in by_packet.items():
+            pkt = group[0].packet
+            g = tel[name]
+            cat = {k: np.concatenate([b.columns[k] for b in group]) for k in group[0].columns}
+            host = np.concatenate([np.broadcast_to(b.host_time, (len(b),)) for b in group])
+            ticks = cat["tick"]
+            _append(g["sequence"], cat["sequence"])
+            _append(g["tick"], ticks)
+            _append(g["device_time"], self._unwrap[name].unwrap(ticks) / self.d.control_rate_hz)
+            _append(g["host_time"], host)
+            fg = frames[name]
+            if pkt.variable_item is None:
+                raw = np.concatenate([b.raw for b in group])
+                for item in pkt.items:
+                    _append(g[item.name], cat[item.name])
+                    if item.has_conversion:
+                        _append(g["raw"][item.name], raw[item.name].astype(item.wire_dtype.newbyteorder("=")))
+                    for flag in item.bits:
+                        _append(g[flag], cat[flag])
+                _append(fg["data"], raw.view(np.uint8).reshape(len(raw), -1))
+            else:
+                for item in pkt.items:
+                    if item.is_variable:
+                        values = cat[item.name]
+                        _append_stream(g[item.name], [v.encode("utf-8") if isinstance(v, str) else bytes(v)
+                                                      for v in values])
+                    else:
+                        _append(g[item.name], cat[item.name])
+                        if item.has_conversion:
+                            _append(g["raw"][item.name], np.asarray(item.to_raw(cat[item.name])).astype(
+                                item.wire_dtype.newbyteorder("=")))
+                        for flag in item.bits:
+                            _append(g[flag], cat[flag])
+                _append_stream(fg["stream"], [fr for b in group for fr in b.frames])
+            _append(fg["host_time"], host)
+            self.frames_written += len(host)
+            self.last_host_time = float(host[-1])
+
+    def journal(self, records: list[tuple[float, str, dict[str, Any], bytes]]) -> None:
+        """Append journal records (time, kind, JSON-able dict, blob)."""
+        if not records:
+            return
+        j = self.f["journal"]
+        kinds = list(schema.JOURNAL_KINDS)
+        _append(j["time"], np.array([r[0] for r in records], dtype=np.float64))
+        _append(j["kind"], np.array([kinds.index(r[1]) for r in records], dtype=np.uint8))
+        _append_stream(j["text"], [json.dumps(r[2], default=_json_default).encode("utf-8") for r in records])
+        _append_stream(j["blob"], [bytes(r[3]) for r in records])
+
+    def flush(self) -> None:
+        self.f.flush()
+
+    @property
+    def size_bytes(self) -> int:
+        try:
+            return self.path.stat().st_size
+        except OSError:
+            return 0
+
+    def close(self, clean: bool = True) -> None:
+        """Close; a clean close reopens the file to mark it complete (not possible in
+        SWMR write mode, which allows no new attributes)."""
+        try:
+            self.f.close()
+        finally:
+            if clean:
+                with h5py.File(self.path, "r+", libver=schema.LIBVER) as f:
+                    f.attrs["clean_close"] = True
+                    f.attrs["stop_utc"] = datetime.now(timezone.utc).isoformat()
+                    f.attrs["frames"] = self.frames_written
+
+
+def _json_default(obj):
+    if isinstance(obj, np.generic):
+        return obj.item()
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (bytes, bytearray)):
+        return obj.hex()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"cannot record a {type(obj).__name__} in the journal")

@@ -1,0 +1,293 @@
+"""The recorder: telemetry and journal records to HDF5, written by its own process.
+
+Subscribing it to a client (`client.subscribe(recorder)`) costs the link one
+`put_nowait` of the frame bytes per block: the disk never slows the link.  The writer
+process (writer.py) batches what arrived and writes + flushes every `flush_interval_s`
+(0.25 s: at most that much is lost in a crash, half the 0.5 s the log promises).  A
+failed write (disk full, file too large, device gone) stops the recording with a
+message that says what happened; the file keeps everything up to the last flush, and
+the link and everything else go on.
+"""
+
+from __future__ import annotations
+
+import errno
+import logging
+import multiprocessing as mp
+import queue
+import shutil
+import tempfile
+import threading
+import time
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ..codec import TelemetryBlock
+from ..dictionary import Dictionary
+from ..errors import GroundStationError
+from .schema import JOURNAL_KINDS
+from .writer import writer_main
+
+log = logging.getLogger(__name__)
+
+DEFAULT_TEMPLATE = "{date}_{time}_{test}_run{run:03d}.h5"
+
+
+class RecorderError(GroundStationError):
+    """A recording could not be started or had to stop (the message says why)."""
+
+
+@dataclass
+class RecorderStatus:
+    state: str                  # "idle", "recording", "stopped", "failed"
+    path: Path | None
+    frames: int
+    bytes: int
+    error: str
+    discarded_blocks: int       # blocks that could not be queued (writer too slow or failed)
+    files: list[Path]
+
+
+def log_path(folder: str | Path, test_name: str = "test", template: str = DEFAULT_TEMPLATE,
+             run: int | None = None) -> tuple[Path, int]:
+    """The next free file name from the template; the run number counts up from 1."""
+    folder = Path(folder)
+    now = datetime.now()
+    safe = "".join(c if c.isalnum() or c in "-_" else "-" for c in test_name) or "test"
+    start = run or 1
+    for n in range(start, start + 10000):
+        name = template.format(date=now.strftime("%Y%m%d"), time=now.strftime("%H%M%S"),
+                               test=safe, run=n)
+        path = folder / name
+        if not path.exists():
+            return path, n
+    raise RecorderError(f"no free file name for '{template}' in {folder}")
+
+
+def explain_error(exc: BaseException, path: Path) -> str:
+    err = getattr(exc, "errno", None)
+    text = str(exc)
+    if err in (errno.ENOSPC, errno.EDQUOT) or "No space left" in text:
+        return f"disk full while writing {path}"
+    if err == errno.EFBIG or "File too large" in text:
+        return f"file size limit reached while writing {path}"
+    if err in (errno.EACCES, errno.EPERM) or "ermission denied" in text:
+        return f"permission denied writing {path}"
+    if err == errno.ENOENT or "No such file" in text:
+        return f"{path.parent} does not exist"
+    if err == errno.ENOTDIR or "Not a directory" in text:
+        return f"{path.parent} is not a folder (a file of that name is in the way)"
+    if err == errno.EROFS:
+        return f"{path.parent} is on a read-only file system"
+    return f"write to {path} failed ({type(exc).__name__}: {text})"
+
+
+class Recorder:
+    """Records telemetry blocks (call it with each block) and journal records to HDF5.
+
+    The file is written by a separate process (writer.py); this object only queues.
+    Callbacks `on_flush(status, last_host_time)` and `on_failure(message)` run in a
+    small status thread of this process."""
+
+    def __init__(self, dictionary: Dictionary, folder: str | Path, *, test_name: str = "test",
+                 template: str = DEFAULT_TEMPLATE, notes: str = "", testbed_text: str = "",
+                 testbed_name: str = "", testbed_path: str = "", flush_interval_s: float = 0.25,
+                 rollover_bytes: int | None = None, rollover_seconds: float | None = None,
+                 queue_blocks: int = 20000, link_stats: Callable[[], Any] | None = None,
+                 on_failure: Callable[[str], None] | None = None,
+                 on_flush: Callable[["RecorderStatus", float | None], None] | None = None):
+        self.d = dictionary
+        self.folder = Path(folder)
+        self.test_name = test_name
+        self.config = {"test_name": test_name, "template": template, "notes": notes,
+                       "testbed_text": testbed_text, "testbed_name": testbed_name,
+                       "testbed_path": testbed_path, "flush_interval_s": flush_interval_s,
+                       "rollover_bytes": rollover_bytes, "rollover_seconds": rollover_seconds,
+                       "folder": str(self.folder)}
+        self.queue_blocks = queue_blocks
+        self.link_stats = link_stats
+        self.on_failure = on_failure
+        self.on_flush = on_flush
+        self.state = "idle"
+        self.error = ""
+        self.discarded_blocks = 0
+        self.files: list[Path] = []
+        self.path: Path | None = None
+        self._frames_closed = 0        # frames in files already rolled over
+        self._frames = 0
+        self._bytes = 0
+        self.last_flushed_host_time: float | None = None
+        self._proc = None
+        self._inbox = None
+        self._outbox = None
+        self._status_thread: threading.Thread | None = None
+        self._stopped = threading.Event()
+        self._tmpdir: Path | None = None
+
+    # ------------------------------------------------------------------ control
+    def start(self, timeout: float = 60.0) -> Path:
+        """Create the first file (in the writer process); raises RecorderError if it cannot."""
+        if self.state == "recording":
+            raise RecorderError("already recording")
+        if not self.folder.is_dir():
+            try:
+                self.folder.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise RecorderError(f"cannot create the log folder: "
+                                    f"{explain_error(exc, self.folder / 'x')}") from None
+        path, run = log_path(self.folder, self.test_name, self.config["template"])
+        ctx = mp.get_context("spawn")
+        self._inbox = ctx.Queue(maxsize=self.queue_blocks)
+        self._outbox = ctx.Queue()
+        self._proc = ctx.Process(target=writer_main, name="gs-log-writer", daemon=True,
+                                 args=(self._inbox, self._outbox, str(self._protocol_dir()),
+                                       {**self.config, "path": str(path), "run": run}))
+        self._proc.start()
+        try:
+            msg = self._outbox.get(timeout=timeout)
+        except queue.Empty:
+            self._kill()
+            raise RecorderError(f"the log writer did not start within {timeout} s") from None
+        if msg[0] != "started":
+            self._kill()
+            raise RecorderError(msg[1])
+        self.path = Path(msg[1])
+        self.files.append(self.path)
+        self.state = "recording"
+        self._stopped.clear()
+        self._status_thread = threading.Thread(target=self._watch, name="gs-recorder-status",
+                                               daemon=True)
+        self._status_thread.start()
+        return self.path
+
+    def _protocol_dir(self) -> Path:
+        """The dictionary's TOML files, as the writer must decode with the same ones."""
+        tmp = Path(tempfile.mkdtemp(prefix="gs-protocol-"))
+        self._tmpdir = tmp
+        for name, text in self.d.source_texts.items():
+            (tmp / name).write_text(text, encoding="utf-8")
+        return tmp
+
+    def __call__(self, block: TelemetryBlock) -> None:
+        """Subscriber entry point: never blocks, never raises."""
+        if self.state != "recording" or not len(block):
+            return
+        if block.raw is not None:
+            data: Any = block.raw.tobytes()
+        else:
+            data = list(block.frames)
+        host = np.ascontiguousarray(np.broadcast_to(block.host_time, (len(block),)), dtype=np.float64)
+        try:
+            self._inbox.put_nowait(("frames", block.packet.id, data, host))
+        except queue.Full:
+            self.discarded_blocks += 1
+
+    def record(self, kind: str, record: dict[str, Any], blob: bytes = b"",
+               at: float | None = None) -> None:
+        """A journal record (command, parameter table, profile, note, ...), any thread."""
+        if kind not in JOURNAL_KINDS:
+            raise ValueError(f"unknown journal kind {kind!r} (known: {', '.join(JOURNAL_KINDS)})")
+        if self.state != "recording":
+            return
+        try:
+            self._inbox.put_nowait(("journal", at if at is not None else time.time(), kind,
+                                    record, bytes(blob)))
+        except queue.Full:
+            self.discarded_blocks += 1
+
+    def note(self, text: str) -> None:
+        self.record("note", {"text": text})
+
+    def stop(self, timeout: float = 30.0) -> RecorderStatus:
+        """Write what is queued, close the file cleanly, return the final status."""
+        if self.state == "recording":
+            try:
+                self._inbox.put(("stop",), timeout=timeout)
+            except queue.Full:
+                pass
+            self._stopped.wait(timeout)
+        if self._status_thread is not None:
+            self._status_thread.join(timeout)
+            self._status_thread = None
+        if self._proc is not None:
+            self._proc.join(timeout)
+            if self._proc.is_alive():
+                self._kill()
+            self._proc = None
+        for q in (self._inbox, self._outbox):
+            if q is not None:
+                q.close()
+                q.cancel_join_thread()
+        self._inbox = self._outbox = None
+        if self._tmpdir is not None:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            self._tmpdir = None
+        return self.status()
+
+    def _kill(self) -> None:
+        if self._proc is not None and self._proc.is_alive():
+            self._proc.kill()
+            self._proc.join(5)
+
+    def status(self) -> RecorderStatus:
+        return RecorderStatus(self.state, self.path, self._frames_closed + self._frames,
+                              self._bytes, self.error, self.discarded_blocks, list(self.files))
+
+    # ------------------------------------------------------------------ status thread
+    def _watch(self) -> None:
+        next_stats = time.monotonic() + 1.0
+        while True:
+            if self.link_stats is not None and time.monotonic() >= next_stats:
+                next_stats = time.monotonic() + 1.0
+                self.record("link", _link_record(self.link_stats()))
+            try:
+                msg = self._outbox.get(timeout=0.2)
+            except queue.Empty:
+                if self._proc is not None and not self._proc.is_alive():
+                    self._failed(f"the log writer process ended unexpectedly (exit code "
+                                 f"{self._proc.exitcode})", self.last_flushed_host_time)
+                    return
+                continue
+            except (EOFError, OSError):
+                return
+            kind = msg[0]
+            if kind == "flushed":
+                self._frames, self._bytes, self.last_flushed_host_time = msg[1], msg[2], msg[3]
+                if self.on_flush is not None:
+                    self.on_flush(self.status(), self.last_flushed_host_time)
+            elif kind == "closed":
+                self._frames_closed += msg[1]
+                self._frames = 0
+            elif kind == "started":
+                self.path = Path(msg[1])
+                self.files.append(self.path)
+            elif kind == "stopped":
+                self._frames = msg[1]
+                self.state = "stopped"
+                self._stopped.set()
+                return
+            elif kind == "failed":
+                self._failed(msg[1], msg[2])
+                return
+
+    def _failed(self, why: str, last: float | None) -> None:
+        when = datetime.fromtimestamp(last).strftime("%H:%M:%S.%f")[:-3] if last else "the start"
+        self.error = (f"recording stopped: {why}. The file keeps what was flushed up to "
+                      f"{when}; free space or choose another folder and start a new recording "
+                      f"- the link is unaffected.")
+        self.state = "failed"
+        log.error(self.error)
+        self._stopped.set()
+        if self.on_failure is not None:
+            self.on_failure(self.error)
+
+
+def _link_record(snap) -> dict[str, Any]:
+    return {"packets": {k: {"frames": v.frames, "dropped": v.dropped, "rate_hz": v.rate_hz}
+                        for k, v in snap.packets.items()},
+            "framing": snap.framing, "latency_ms_mean": snap.latency_ms_mean,
+            "gaps": snap.gap_events[-50:]}

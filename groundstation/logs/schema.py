@@ -1,0 +1,47 @@
+"""The HDF5 log layout (schema version 1), shared by the recorder and the reader.
+
+    /                       attrs: schema, schema_version, uuid, created_utc, software_version,
+                            host, test_name, run, notes, protocol_version, dictionary_hash,
+                            tick_rate_hz; on a clean close also stop_utc, clean_close=True
+    /protocol/<file>.toml   the protocol files as recorded (fixed-length UTF-8 text)
+    /testbed/config         the testbed file as recorded (if known), attrs name, path
+    /telemetry/<PACKET>/    one group per packet, attrs id, description, rate_hz
+        sequence, tick      header counters (u4, as on the wire)
+        device_time         unwrapped tick / tick rate (s since the device booted)
+        host_time           host arrival time (s since the Unix epoch)
+        <item>              engineering units (float64 where a conversion applies, else the
+                            wire type); attrs units, description, conversion, states, limits
+        <flag>              bool, one per status bit
+        raw/<item>          wire counts of every converted item
+        <item>/data|offset|length   a variable (text or bytes) item: byte stream + index
+    /frames/<PACKET>/       the frames as received (re-decodable with a newer dictionary):
+        data (n, frame_len) u1 for fixed packets; a byte stream plus offset/length for
+        variable ones; host_time
+    /journal/               everything that is not telemetry, one row per record:
+        time (host, s), kind (u1, names in attr 'kinds'), text_offset/text_length into
+        text (u1 stream of UTF-8 JSON), blob_offset/blob_length into blob (u1 stream)
+
+Everything is created before SWMR mode starts and only ever appended to, with fixed-size
+types (no variable-length HDF5 types: their heap is not SWMR-safe), so a reader - or
+h5dump - sees a consistent file while it grows and after a crash.  A log whose writer
+was killed keeps HDF5's "open for writing" mark: our reader (SWMR read mode) opens it
+as it is; other tools want `h5clear -s FILE` first.
+"""
+
+from __future__ import annotations
+
+SCHEMA = "groundstation-log"
+SCHEMA_VERSION = 1
+CHUNK_ROWS = 8192                 # rows per chunk of a per-frame dataset
+STREAM_CHUNK = 65536              # bytes per chunk of a byte stream
+
+JOURNAL_KINDS = ("note", "command", "event", "parameter_table", "profile",
+                 "function_generator", "link", "recorder", "testbed")
+
+#: compression of per-frame datasets: deflate (gzip) level 1 after byte shuffling. Among
+#: the filters every HDF5 reader has (h5dump, MATLAB, HDFView), it is the fast one;
+#: benchmarks/bench_logs.py measures it against LZF (h5py-only) and no compression.
+COMPRESSION = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
+#: file format bounds: HDF5 1.10 (the first with SWMR), so 1.10-era tools and MATLAB
+#: read our logs; "latest" would tie them to the newest library
+LIBVER = ("v110", "v110")

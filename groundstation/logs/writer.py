@@ -1,0 +1,163 @@
+"""The log writer process: receives frames and journal records, writes the HDF5 file.
+
+Why a process and not a thread: HDF5 does all its work under the interpreter lock, and
+after a failed write (disk full, file too large, device gone) its library state is not
+trustworthy - we have seen it crash the interpreter on the way out.  In its own process
+the writer cannot stall the link or the GUI, and whatever happens to it, the operator's
+program keeps running; what it flushed stays valid on disk (SWMR ordering).
+
+Frames travel as the bytes received (78 bytes a HIGH_RATE frame) and are decoded here
+with the same codec, so nothing heavier than the wire format crosses the pipe.
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import resource
+import shutil
+import time
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..codec import FrameCodec
+from ..dictionary import load_dictionary
+from .h5file import LogFile
+
+
+def _explain(exc: BaseException, path: Path) -> str:
+    from .recorder import explain_error
+    return explain_error(exc, path)
+
+
+def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> None:
+    """Entry point of the writer process (multiprocessing 'spawn')."""
+    d = load_dictionary(protocol_dir)
+    codec = FrameCodec(d)
+    parent = os.getppid()
+    lf: LogFile | None = None
+
+    def open_file(path: Path, run: int) -> LogFile:
+        f = LogFile(path, d, test_name=config["test_name"], run=run, notes=config["notes"],
+                    testbed_text=config["testbed_text"], testbed_name=config["testbed_name"],
+                    testbed_path=config["testbed_path"])
+        f.journal([(time.time(), "recorder", {"action": "started", "file": path.name,
+                                              "run": run, "test_name": config["test_name"]}, b"")])
+        f.flush()
+        return f
+
+    path, run = Path(config["path"]), config["run"]
+    try:
+        lf = open_file(path, run)
+    except Exception as exc:
+        outbox.put(("start_failed", f"cannot create log file: {_explain(exc, path)}"))
+        return
+    outbox.put(("started", str(path)))
+    blocks: list = []
+    journal: list = []
+    interval = config["flush_interval_s"]
+    next_flush = time.monotonic() + interval
+    stopping = False
+    while not stopping:
+        try:
+            msg = inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
+            while True:
+                kind = msg[0]
+                if kind == "frames":
+                    _, pid, data, host = msg
+                    pkt = codec.packet(pid)
+                    if pkt.variable_item is None:
+                        arr = np.frombuffer(data, np.uint8).reshape(len(host), -1)
+                        blocks.append(codec.decode_fixed(pkt, arr, host))
+                    else:
+                        blocks.append(codec.decode_variable(pkt, data, host))
+                elif kind == "journal":
+                    journal.append(msg[1:])
+                elif kind == "stop":
+                    stopping = True
+                    break
+                msg = inbox.get_nowait()
+        except queue.Empty:
+            pass
+        except (EOFError, OSError):        # the parent went away: finish cleanly
+            stopping = True
+        if os.getppid() != parent:         # parent killed: keep what we have, close cleanly
+            stopping = True
+        if time.monotonic() < next_flush and not stopping:
+            continue
+        next_flush = time.monotonic() + interval
+        short = _space_short(lf, blocks, journal)
+        if short:
+            # stop while the file can still be closed properly: a write that fails for
+            # want of space can leave HDF5's end-of-file pointer past the real end
+            try:
+                lf.journal([(time.time(), "recorder", {"action": "stopped", "reason": short}, b"")])
+                lf.flush()
+                lf.close(clean=True)
+            except Exception:   # the margin was not enough after all; the flushed part stands
+                pass
+            outbox.put(("failed", short, lf.last_host_time, lf.frames_written))
+            return
+        try:
+            lf.append(blocks)
+            if stopping:
+                journal.append((time.time(), "recorder", {"action": "stopped",
+                                                          "frames": lf.frames_written}, b""))
+            lf.journal(journal)
+            lf.flush()
+            blocks, journal = [], []
+            outbox.put(("flushed", lf.frames_written, lf.size_bytes, lf.last_host_time, str(lf.path)))
+            if stopping:
+                lf.close(clean=True)
+                outbox.put(("stopped", lf.frames_written, str(lf.path)))
+                return
+            if _rollover_due(lf, config):
+                lf.journal([(time.time(), "recorder", {"action": "rollover"}, b"")])
+                lf.close(clean=True)
+                outbox.put(("closed", lf.frames_written, str(lf.path)))
+                run += 1
+                path = _next_path(config, run)
+                lf = open_file(path, run)
+                outbox.put(("started", str(path)))
+        except Exception as exc:
+            last = lf.last_host_time
+            outbox.put(("failed", _explain(exc, lf.path), last, lf.frames_written))
+            outbox.close()
+            outbox.join_thread()
+            # no close, no cleanup: after a failed write HDF5 may crash while closing; the
+            # flushed part of the file is already safe on disk
+            os._exit(3)
+
+
+SPACE_MARGIN = 256 * 1024     # bytes kept free for metadata, chunk rounding and the close
+EXPANSION = 5                  # file bytes per frame byte, worst case (columns, raw, frames)
+
+
+def _space_short(lf: LogFile, blocks: list, journal: list) -> str:
+    """Why the next write might not fit (empty string: it fits)."""
+    pending = sum(b.raw.nbytes if b.raw is not None else sum(map(len, b.frames)) for b in blocks)
+    need = EXPANSION * pending + sum(len(r[3]) + 512 for r in journal) + SPACE_MARGIN
+    try:
+        free = shutil.disk_usage(lf.path.parent).free
+    except OSError:
+        return ""
+    if free < need:
+        return f"disk nearly full ({free / 1e6:.1f} MB free) writing {lf.path}"
+    soft, _ = resource.getrlimit(resource.RLIMIT_FSIZE)
+    if soft != resource.RLIM_INFINITY and soft - lf.size_bytes < need:
+        return f"file size limit ({soft / 1e6:.1f} MB) nearly reached writing {lf.path}"
+    return ""
+
+
+def _rollover_due(lf: LogFile, config: dict[str, Any]) -> bool:
+    if config["rollover_bytes"] is not None and lf.size_bytes >= config["rollover_bytes"]:
+        return True
+    return config["rollover_seconds"] is not None and time.time() - lf.created >= config["rollover_seconds"]
+
+
+def _next_path(config: dict[str, Any], run: int) -> Path:
+    from .recorder import log_path
+    path, _ = log_path(config["folder"], config["test_name"], config["template"], run)
+    return path
