@@ -4,6 +4,7 @@
     groundstation sim [--tcp-port 5020]    run the simulated testbed
     groundstation monitor --device ADDR    connect and print live link statistics
     groundstation protocol info|check      the protocol dictionary
+    groundstation record --folder logs     record a session to HDF5 (see cli_logs.py)
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import sys
 import threading
 import time
 
-from . import __version__
+from . import __version__, cli_logs
 from .dictionary import load_dictionary
 from .errors import GroundStationError
 
@@ -160,6 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--take-over", action="store_true",
                        help="take the session over from another host")
         s.set_defaults(func=_cmd_monitor if name == "monitor" else _cmd_run)
+    cli_logs.add_parsers(sub)
     return p
 
 

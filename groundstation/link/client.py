@@ -85,6 +85,7 @@ class DeviceClient:
             self.stats.add_framing_source(self._datagrams.counters)
         self._subscribers: list[Callable[[TelemetryBlock], None]] = []
         self._link_listeners: list[Callable[[str, str], None]] = []
+        self._command_listeners: list[Callable[[CommandResult], None]] = []
         self._pending: dict[int, _Pending] = {}
         self._lock = threading.Lock()
         self._send_lock = threading.Lock()
@@ -110,6 +111,11 @@ class DeviceClient:
     def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
         """Call `callback(state, message)` on link state changes ('up', 'lost', 'closed')."""
         self._link_listeners.append(callback)
+
+    def add_command_listener(self, callback: Callable[["CommandResult"], None]) -> None:
+        """Call `callback(result)` when any command ends (completed, refused, failed or
+        timed out), e.g. to journal it in the log."""
+        self._command_listeners.append(callback)
 
     def start(self) -> None:
         """Start the reader threads (no I/O before this)."""
@@ -280,6 +286,11 @@ class DeviceClient:
         finally:
             with self._lock:
                 self._pending.pop(seq, None)
+            for cb in list(self._command_listeners):
+                try:
+                    cb(result)
+                except Exception:
+                    log.exception("command listener failed")
 
     def _rejection(self, name: str, seq: int, reason: str, data: bytes) -> CommandRejected:
         if reason == "DICTIONARY_MISMATCH" and name == "CONNECT":

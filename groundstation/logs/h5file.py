@@ -73,6 +73,16 @@ def _append_stream(g: h5py.Group, records: list[bytes]) -> None:
     _append(g["length"], lengths)
 
 
+def engineering_dtype(item: Item) -> np.dtype:
+    """Stored type of an item in engineering units: float32 when the wire carries at most
+    16-bit counts (float32 keeps every count distinct, half the bytes), float64 for
+    32-bit counts such as the encoders' 1.46 nrad steps, the wire type when there is no
+    conversion."""
+    if not item.has_conversion:
+        return item.wire_dtype.newbyteorder("=")
+    return np.dtype(np.float32) if item.wire_dtype.itemsize <= 2 else np.dtype(np.float64)
+
+
 def _item_attrs(ds: h5py.Dataset, item: Item) -> None:
     ds.attrs["units"] = item.units
     ds.attrs["description"] = item.description
@@ -177,8 +187,7 @@ class LogFile:
                 s.attrs["encoding"] = "utf-8" if item.type == "str" else "binary"
                 s.attrs["description"] = item.description
                 continue
-            dt = np.float64 if item.has_conversion else item.wire_dtype.newbyteorder("=")
-            _item_attrs(_appendable(g, item.name, dt), item)
+            _item_attrs(_appendable(g, item.name, engineering_dtype(item)), item)
             if item.has_conversion:
                 r = _appendable(raw, item.name, item.wire_dtype.newbyteorder("="))
                 r.attrs["units"] = "counts"

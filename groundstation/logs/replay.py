@@ -381,8 +381,8 @@ class _LogReader:
             lo = int(w.row[k0 + a]) - w.first_row[ti]
             hi = lo + (b - a)
             host = w.host[ti][lo:hi].copy()
-            if t.fixed:
-                out.append(self.codec.decode_fixed(t.pkt, w.frames[ti][lo:hi], host))
+            if t.fixed:   # a copy: a block kept by a consumer does not pin the whole window
+                out.append(self.codec.decode_fixed(t.pkt, w.frames[ti][lo:hi].copy(), host))
             else:
                 out.append(self.codec.decode_variable(t.pkt, w.frames[ti][lo:hi], host))
         return out
@@ -493,6 +493,7 @@ class ReplaySource:
                 self._ops.append(("resume", None))
             self._playing = True
             self._reanchor = True
+            self._idle = False
             self._cv.notify_all()
 
     def pause(self) -> None:
@@ -640,7 +641,9 @@ class ReplaySource:
                 self._idle = False
                 op = self._ops.popleft() if self._ops else None
                 speed = self._speed
-                reanchor, self._reanchor = self._reanchor, False
+                reanchor = False
+                if op is None:          # a seek's re-anchoring waits for the seek to be done
+                    reanchor, self._reanchor = self._reanchor, False
             if op is not None:
                 self._operation(*op)
                 continue
@@ -684,6 +687,10 @@ class ReplaySource:
         w = self._window = self._reader.next_window()
         if w is None:
             self._set_finished()
+        else:
+            rng = self._reader.time_range()
+            if rng:
+                self._start_time, self._end_time = rng
         return w
 
     def _set_finished(self) -> None:
@@ -730,14 +737,9 @@ class ReplaySource:
                 self._position = self._end_time if rng else None
                 self._set_finished()
         elif kind == "resume":
-            if self._reader.refresh() or (self._window is not None and self._window.k < len(self._window)):
+            w = self._window
+            if (w is not None and w.k < len(w)) or self._reader.refresh():
                 self._clear_finished()
-            else:
-                self._finished.clear()      # look once more; re-set quietly if still at the end
-                if self._current() is None:
-                    pass
-                else:
-                    self._notify("up", "")
         elif kind == "step":
             remaining = arg
             while remaining > 0:

@@ -1,0 +1,28 @@
+"""Wiring a recorder to a live link: telemetry, commands with their stages, link health."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+from ..link.client import CommandResult, DeviceClient
+from .recorder import Recorder
+
+#: commands too frequent and too dull for the journal (the link statistics cover them)
+UNJOURNALED = {"HEARTBEAT"}
+
+
+def attach_recorder(client: DeviceClient, recorder: Recorder) -> None:
+    """Subscribe the recorder to the client's telemetry, journal every command, and
+    journal the link statistics once a second (drops and CRC errors with their times)."""
+    if recorder.link_stats is None:
+        recorder.link_stats = client.stats.snapshot
+    client.subscribe(recorder)
+
+    def journal_command(result: CommandResult) -> None:
+        if result.name in UNJOURNALED:
+            return
+        record = asdict(result)
+        record["final_stage"] = result.final_stage
+        t = result.stages[0].host_time if result.stages else None
+        recorder.record("command", record, at=t)
+    client.add_command_listener(journal_command)
