@@ -33,21 +33,24 @@ def _text_dataset(group: h5py.Group, name: str, text: str) -> None:
     group.create_dataset(name, data=np.array(data, dtype=f"S{max(1, len(data))}"))
 
 
-def _appendable(group: h5py.Group, name: str, dtype, row_shape: tuple = (), chunk_rows=None):
+def _appendable(group: h5py.Group, name: str, dtype, row_shape: tuple = (), chunk_rows=None,
+                compression: dict | None = None):
     chunk_rows = chunk_rows or schema.CHUNK_ROWS
     row_bytes = int(np.prod(row_shape, dtype=np.int64)) * np.dtype(dtype).itemsize if row_shape else np.dtype(dtype).itemsize
     if row_shape:   # keep chunks near 0.5 MB for wide rows (raw frames)
         chunk_rows = max(64, min(chunk_rows, (512 * 1024) // max(1, row_bytes)))
     return group.create_dataset(name, shape=(0, *row_shape), maxshape=(None, *row_shape),
-                                dtype=dtype, chunks=(chunk_rows, *row_shape), **schema.COMPRESSION)
+                                dtype=dtype, chunks=(chunk_rows, *row_shape),
+                                **(schema.COMPRESSION if compression is None else compression))
 
 
-def _stream(group: h5py.Group, name: str) -> h5py.Group:
+def _stream(group: h5py.Group, name: str, compression: dict | None = None) -> h5py.Group:
     g = group.create_group(name)
     g.create_dataset("data", shape=(0,), maxshape=(None,), dtype=np.uint8,
-                     chunks=(schema.STREAM_CHUNK,), **schema.COMPRESSION)
-    _appendable(g, "offset", np.uint64)
-    _appendable(g, "length", np.uint32)
+                     chunks=(schema.STREAM_CHUNK,),
+                     **(schema.COMPRESSION if compression is None else compression))
+    _appendable(g, "offset", np.uint64, compression=compression)
+    _appendable(g, "length", np.uint32, compression=compression)
     g.attrs["layout"] = "stream: record i is data[offset[i] : offset[i] + length[i]]"
     return g
 
@@ -102,9 +105,10 @@ class LogFile:
 
     def __init__(self, path: Path, dictionary: Dictionary, *, test_name: str = "", run: int = 1,
                  notes: str = "", testbed_text: str = "", testbed_name: str = "",
-                 testbed_path: str = ""):
+                 testbed_path: str = "", compression: dict | None = None):
         self.path = Path(path)
         self.d = dictionary
+        self.compression = dict(schema.COMPRESSION if compression is None else compression)
         self.frames_written = 0
         self.last_host_time: float | None = None
         self._unwrap: dict[str, TickUnwrapper] = defaultdict(TickUnwrapper)
@@ -139,6 +143,7 @@ class LogFile:
         a["dictionary_hash"] = f"{d.hash:08x}"
         a["tick_rate_hz"] = d.control_rate_hz
         a["clean_close"] = False
+        a["compression"] = json.dumps(self.compression)
         proto = f.create_group("protocol")
         for name, text in d.source_texts.items():
             _text_dataset(proto, name, text)
@@ -154,20 +159,20 @@ class LogFile:
             self._create_packet(tel.create_group(pkt.name), pkt)
             fg = frames.create_group(pkt.name)
             if pkt.variable_item is None:
-                _appendable(fg, "data", np.uint8, (pkt.fixed_payload_size + HEADER_SIZE + CRC_SIZE,))
+                _appendable(fg, "data", np.uint8, (pkt.fixed_payload_size + HEADER_SIZE + CRC_SIZE,), compression=self.compression)
                 fg.attrs["layout"] = "fixed: one row per frame, header to CRC"
             else:
-                _stream(fg, "stream")
+                _stream(fg, "stream", self.compression)
                 fg.attrs["layout"] = "stream: frames in the 'stream' byte stream"
-            _appendable(fg, "host_time", np.float64)
+            _appendable(fg, "host_time", np.float64, compression=self.compression)
         j = f.create_group("journal")
         j.attrs["kinds"] = json.dumps(list(schema.JOURNAL_KINDS))
         j.attrs["description"] = ("one row per record: time (host s), kind (index into "
                                   "'kinds'), JSON text and an optional binary blob")
-        _appendable(j, "time", np.float64, chunk_rows=1024)
-        _appendable(j, "kind", np.uint8, chunk_rows=1024)
-        _stream(j, "text")
-        _stream(j, "blob")
+        _appendable(j, "time", np.float64, chunk_rows=1024, compression=self.compression)
+        _appendable(j, "kind", np.uint8, chunk_rows=1024, compression=self.compression)
+        _stream(j, "text", self.compression)
+        _stream(j, "blob", self.compression)
 
     def _create_packet(self, g: h5py.Group, pkt: PacketDef) -> None:
         g.attrs["id"] = pkt.id
@@ -178,22 +183,22 @@ class LogFile:
                 ("tick", np.uint32, "ticks", "device tick (1200 Hz) as on the wire"),
                 ("device_time", np.float64, "s", "unwrapped device tick / tick rate: device time since boot"),
                 ("host_time", np.float64, "s", "host arrival time, seconds since the Unix epoch")):
-            ds = _appendable(g, name, dt)
+            ds = _appendable(g, name, dt, compression=self.compression)
             ds.attrs["units"], ds.attrs["description"] = units, desc
         raw = g.create_group("raw")
         for item in pkt.items:
             if item.is_variable:
-                s = _stream(g, item.name)
+                s = _stream(g, item.name, self.compression)
                 s.attrs["encoding"] = "utf-8" if item.type == "str" else "binary"
                 s.attrs["description"] = item.description
                 continue
-            _item_attrs(_appendable(g, item.name, engineering_dtype(item)), item)
+            _item_attrs(_appendable(g, item.name, engineering_dtype(item), compression=self.compression), item)
             if item.has_conversion:
-                r = _appendable(raw, item.name, item.wire_dtype.newbyteorder("="))
+                r = _appendable(raw, item.name, item.wire_dtype.newbyteorder("="), compression=self.compression)
                 r.attrs["units"] = "counts"
                 r.attrs["description"] = f"wire counts of {item.name}"
             for flag, bit in item.bits.items():
-                ds = _appendable(g, flag, np.bool_)
+                ds = _appendable(g, flag, np.bool_, compression=self.compression)
                 ds.attrs["description"] = f"bit {bit} of {item.name}"
                 ds.attrs["units"] = ""
 

@@ -67,6 +67,9 @@ class Channel:
     limits: dict | None = None
     encoding: str = ""        # text items: "utf-8" (str) or "binary" (bytes)
     has_raw: bool = False     # an eng channel whose wire counts are in raw/<name>
+    from_raw: bool = False    # read() computes it from raw/<name> with `conversion`, in
+                              # float64 exactly as the live decoder does (the stored column
+                              # is a narrower float, kept for h5dump and direct readers)
 
 
 @dataclass(frozen=True)
@@ -164,6 +167,25 @@ def _utc_seconds(text: str) -> float | None:
         return datetime.fromisoformat(text).timestamp()
     except (TypeError, ValueError):
         return None
+
+
+def _convertible(conversion: dict | None) -> bool:
+    return isinstance(conversion, dict) and (
+        isinstance(conversion.get("polynomial"), list) or "scale" in conversion)
+
+
+def _to_engineering(raw: np.ndarray, conversion: dict) -> np.ndarray:
+    """Wire counts -> engineering units by the recorded conversion, with the same float64
+    operations as dictionary.Item.to_engineering (so the values equal the live ones)."""
+    if "polynomial" in conversion:
+        return np.polynomial.polynomial.polyval(raw.astype(np.float64),
+                                                [float(c) for c in conversion["polynomial"]])
+    eng = raw.astype(np.float64)
+    eng *= float(conversion["scale"])
+    offset = float(conversion.get("offset", 0.0) or 0.0)
+    if offset:
+        eng += offset
+    return eng
 
 
 def _search(ds: h5py.Dataset, n: int, value: float, side: str) -> int:
@@ -345,12 +367,16 @@ class LogReader:
                 continue
             kind = ("header" if name in HEADER_CHANNELS
                     else "flag" if obj.dtype == np.bool_ else "eng")
+            conversion = json.loads(_text(a["conversion"])) if "conversion" in a else None
+            has_raw = name in raw_names
+            from_raw = (kind == "eng" and has_raw and _convertible(conversion)
+                        and obj.dtype.kind == "f" and obj.dtype.itemsize < 8)
             out.append(Channel(
-                name, _text(a.get("units", "")), _text(a.get("description", "")), obj.dtype, kind,
-                conversion=json.loads(_text(a["conversion"])) if "conversion" in a else None,
+                name, _text(a.get("units", "")), _text(a.get("description", "")),
+                np.dtype(np.float64) if from_raw else obj.dtype, kind, conversion=conversion,
                 states=json.loads(_text(a["states"])) if "states" in a else {},
                 limits=json.loads(_text(a["limits"])) if "limits" in a else None,
-                has_raw=name in raw_names))
+                has_raw=has_raw, from_raw=from_raw))
         for ch in list(out):
             if ch.has_raw:
                 ds = raw_group[ch.name]
@@ -478,6 +504,9 @@ class LogReader:
                                                     decode=ch.encoding == "utf-8" and not raw)
             elif raw and ch.has_raw:
                 out[ch.name] = self._dataset(f"{base}/raw/{ch.name}")[i0:i1]
+            elif ch.from_raw:
+                out[ch.name] = _to_engineering(self._dataset(f"{base}/raw/{ch.name}")[i0:i1],
+                                               ch.conversion)
             else:
                 out[ch.name] = self._dataset(f"{base}/{ch.name}")[i0:i1]
         short = min((len(v) for v in out.values()), default=0)

@@ -99,7 +99,8 @@ class Recorder:
                  rollover_bytes: int | None = None, rollover_seconds: float | None = None,
                  queue_blocks: int = 20000, link_stats: Callable[[], Any] | None = None,
                  on_failure: Callable[[str], None] | None = None,
-                 on_flush: Callable[["RecorderStatus", float | None], None] | None = None):
+                 on_flush: Callable[["RecorderStatus", float | None], None] | None = None,
+                 compression: dict | None = None):
         self.d = dictionary
         self.folder = Path(folder)
         self.test_name = test_name
@@ -107,7 +108,7 @@ class Recorder:
                        "testbed_text": testbed_text, "testbed_name": testbed_name,
                        "testbed_path": testbed_path, "flush_interval_s": flush_interval_s,
                        "rollover_bytes": rollover_bytes, "rollover_seconds": rollover_seconds,
-                       "folder": str(self.folder)}
+                       "folder": str(self.folder), "compression": compression}
         self.queue_blocks = queue_blocks
         self.link_stats = link_stats
         self.on_failure = on_failure
