@@ -80,8 +80,8 @@ def read_timings(path: str) -> dict:
     with LogReader(path) as r:
         full = r.read("HIGH_RATE", ["encoder_inner"], with_time=False)["encoder_inner"]
         t_full = time.perf_counter() - t
-        s = r.summary()
-        mid = (s["packets"]["HIGH_RATE"]["first_device_time"] + s["packets"]["HIGH_RATE"]["last_device_time"]) / 2
+        hr = r.summary().packets["HIGH_RATE"]
+        mid = (hr.first_device_time + hr.last_device_time) / 2
         t = time.perf_counter()
         window = r.read("HIGH_RATE", ["encoder_inner"], start=mid, stop=mid + 10.0)
         t_window = time.perf_counter() - t

@@ -1,6 +1,9 @@
 """HDF5 recording, reading, export and replay of testbed sessions."""
 
+from .export import export_csv, export_mat
 from .h5file import LogFile
+from .reader import LogError, LogFormatError, LogQueryError, LogReader
 from .recorder import Recorder, RecorderError, RecorderStatus, log_path
 
-__all__ = ["LogFile", "Recorder", "RecorderError", "RecorderStatus", "log_path"]
+__all__ = ["LogError", "LogFile", "LogFormatError", "LogQueryError", "LogReader", "Recorder",
+           "RecorderError", "RecorderStatus", "export_csv", "export_mat", "log_path"]

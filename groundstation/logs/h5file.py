@@ -276,7 +276,13 @@ class LogFile:
             self.f.close()
         finally:
             if clean:
-                with h5py.File(self.path, "r+", libver=schema.LIBVER) as f:
+                try:
+                    f = h5py.File(self.path, "r+", libver=schema.LIBVER)
+                except BlockingIOError:
+                    # a reader elsewhere holds HDF5's file lock (h5dump, another tool);
+                    # the attributes below are the only change, safe without the lock
+                    f = h5py.File(self.path, "r+", libver=schema.LIBVER, locking=False)
+                with f:
                     f.attrs["clean_close"] = True
                     f.attrs["stop_utc"] = datetime.now(timezone.utc).isoformat()
                     f.attrs["frames"] = self.frames_written

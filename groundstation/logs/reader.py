@@ -19,7 +19,7 @@ from __future__ import annotations
 import json
 import tomllib
 from dataclasses import dataclass, field
-from datetime import datetime
+from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any, Iterable
 
@@ -210,6 +210,19 @@ def _search(ds: h5py.Dataset, n: int, value: float, side: str) -> int:
     return c0 + int(np.searchsorted(block, value, side=side))
 
 
+def _open_h5(path: Path) -> h5py.File:
+    """Open for SWMR reading without an HDF5 file lock: a reader holding the shared lock
+    would make the recorder's final reopen (which marks the log clean_close) fail in the
+    writing process.  If this process already has the file open with locking (a recorder
+    in this process), HDF5 requires the same flag: then open it that way."""
+    try:
+        return h5py.File(path, "r", libver="latest", swmr=True, locking=False)
+    except OSError as exc:
+        if "locking" not in str(exc):
+            raise
+    return h5py.File(path, "r", libver="latest", swmr=True)
+
+
 class LogReader:
     """A recorded session, read lazily.  Use as a context manager or call close()."""
 
@@ -233,13 +246,14 @@ class LogReader:
                 f"{self.path} is not an HDF5 file (it starts with {head!r}); a ground-station "
                 f"log is the .h5 file `groundstation record` writes")
         try:
-            self._f = h5py.File(self.path, "r", libver="latest", swmr=True)
+            self._f = _open_h5(self.path)
         except OSError as exc:
             raise LogFormatError(f"{self.path}: the HDF5 file cannot be opened ({exc})") from None
         self._ds: dict[str, h5py.Dataset] = {}
         self._channels: dict[str, list[Channel]] = {}
         self._info: LogInfo | None = None
         self._origin: dict[str, float] = {}
+        self._order: dict[str, list[str]] | None = None
         try:
             self.schema_version = self._check()
         except BaseException:
@@ -287,7 +301,8 @@ class LogReader:
         return f"LogReader('{self.path}')"
 
     def refresh(self) -> None:
-        """See what a writer has flushed since the file was opened (or last refreshed)."""
+        """See what a writer has flushed since the file was opened (or last refreshed).
+        Root attributes stay as they were at opening (a clean close shows on reopening)."""
         for ds in self._ds.values():
             ds.refresh()
         self._info = None
@@ -332,6 +347,11 @@ class LogReader:
 
     def _item_order(self) -> dict[str, list[str]]:
         """Channel order per packet from the recorded telemetry.toml (items, then flags)."""
+        if self._order is None:
+            self._order = self._parse_item_order()
+        return self._order
+
+    def _parse_item_order(self) -> dict[str, list[str]]:
         try:
             doc = tomllib.loads(self.protocol_files().get("telemetry.toml", ""))
             order = {}
@@ -627,7 +647,7 @@ class LogReader:
                 jt = self._dataset("journal/time")
                 lasts = [float(jt[jt.shape[0] - 1])] if jt.shape[0] else []
             stop = max(lasts) if lasts else (created or 0.0)
-            stop_utc = datetime.fromtimestamp(stop).astimezone().isoformat()
+            stop_utc = datetime.fromtimestamp(stop, timezone.utc).isoformat()
         if created is None:
             firsts = [p.first_host_time for p in packets.values() if p.first_host_time is not None]
             created = min(firsts) if firsts else stop

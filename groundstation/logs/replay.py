@@ -123,7 +123,8 @@ def _log_dictionary(f: h5py.File, path: Path) -> Dictionary:
 class _Track:
     """The recorded frames of one packet, read through a cursor a chunk at a time."""
 
-    def __init__(self, f: h5py.File, pkt: PacketDef, index: int, chunk_rows: int):
+    def __init__(self, f: h5py.File, pkt: PacketDef, index: int, chunk_rows: int,
+                 sync: int):
         self.pkt = pkt
         self.index = index
         self.rank = pkt.id
@@ -132,6 +133,8 @@ class _Track:
         self.host_ds = g["host_time"]
         self.dev_ds = f["telemetry"][pkt.name]["device_time"]
         self.fixed = pkt.variable_item is None
+        self.pkt_sync = sync
+        self.warned_order = False
         if self.fixed:
             self.data_ds = g["data"]
             width = pkt.fixed_payload_size + HEADER_SIZE + CRC_SIZE
@@ -208,12 +211,28 @@ class _Track:
     def read(self, row: int, count: int) -> np.ndarray | list[bytes]:
         """The raw frames of rows [row, row + count)."""
         if self.fixed:
-            return self.data_ds[row:row + count]
+            return self._wire_order(self.data_ds[row:row + count])
         off = self.off_ds[row:row + count].astype(np.int64)
         ln = self.len_ds[row:row + count].astype(np.int64)
         base = int(off[0])
         blob = self.data_ds[base:int(off[-1] + ln[-1])].tobytes()
         return [blob[o - base:o - base + n] for o, n in zip(off.tolist(), ln.tolist())]
+
+    def _wire_order(self, data: np.ndarray) -> np.ndarray:
+        """Rows as received.  Logs written before h5file stored the frames via a numpy
+        concatenation (which turns big-endian records into native order) hold the records
+        byte-swapped field by field; their sync word reads 90 EB: swap them back."""
+        sync = self.pkt_sync
+        swapped = (data[:, 0] == (sync & 0xFF)) & (data[:, 1] == (sync >> 8))
+        if swapped.any():
+            if not self.warned_order:
+                self.warned_order = True
+                log.warning("%s frames are stored in host byte order (log written by an older "
+                            "recorder); converting them to wire order", self.pkt.name)
+            native = np.ascontiguousarray(data[swapped]).view(self.pkt.frame_dtype.newbyteorder("="))
+            data[swapped] = native.astype(self.pkt.frame_dtype).view(np.uint8).reshape(
+                -1, data.shape[1])
+        return data
 
 
 def _bisect_ds(ds: h5py.Dataset, n: int, value: float, right: bool = False) -> int:
@@ -265,7 +284,7 @@ class _LogReader:
                 if pkt.name not in self.f["frames"] or pkt.name not in self.f["telemetry"]:
                     continue
                 rows = max(256, int((pkt.rate_hz or 0) * chunk_seconds))
-                self.tracks.append(_Track(self.f, pkt, len(self.tracks), rows))
+                self.tracks.append(_Track(self.f, pkt, len(self.tracks), rows, self.dictionary.sync))
             if not self.tracks:
                 raise ReplayError(f"{self.path}: no recorded packet is known to the dictionary")
             names = [t.pkt.name for t in self.tracks]
@@ -368,13 +387,13 @@ class _LogReader:
         return _Window(idx[order], rows[order], timeline, first, frames, host)
 
     # --------------------------------------------------------------- decoding
-    def blocks(self, w: _Window, k0: int, k1: int) -> list[TelemetryBlock]:
-        """Merged frames [k0, k1) of a window as blocks of consecutive frames of one packet."""
+    def runs(self, w: _Window, k0: int, k1: int) -> Iterator[tuple[int, TelemetryBlock]]:
+        """Merged frames [k0, k1) of a window as blocks of consecutive frames of one
+        packet, each with the merged index just after its last frame (decoded lazily)."""
         if k1 <= k0:
-            return []
+            return
         trk = w.track[k0:k1]
         cuts = np.concatenate(([0], np.flatnonzero(np.diff(trk)) + 1, [len(trk)]))
-        out = []
         for a, b in zip(cuts[:-1].tolist(), cuts[1:].tolist()):
             ti = int(trk[a])
             t = self.tracks[ti]
@@ -382,10 +401,9 @@ class _LogReader:
             hi = lo + (b - a)
             host = w.host[ti][lo:hi].copy()
             if t.fixed:   # a copy: a block kept by a consumer does not pin the whole window
-                out.append(self.codec.decode_fixed(t.pkt, w.frames[ti][lo:hi].copy(), host))
+                yield k0 + b, self.codec.decode_fixed(t.pkt, w.frames[ti][lo:hi].copy(), host)
             else:
-                out.append(self.codec.decode_variable(t.pkt, w.frames[ti][lo:hi], host))
-        return out
+                yield k0 + b, self.codec.decode_variable(t.pkt, w.frames[ti][lo:hi], host)
 
     def close(self) -> None:
         self.f.close()
@@ -409,7 +427,8 @@ def iter_blocks(path: str | Path, start: float | None = None, stop: float | None
             stops = stop_rows if found is not None else None
         reader.reset(rows, stops)
         while (w := reader.next_window()) is not None:
-            yield from reader.blocks(w, 0, len(w))
+            for _, block in reader.runs(w, 0, len(w)):
+                yield block
     finally:
         reader.close()
 
@@ -651,7 +670,7 @@ class ReplaySource:
             if w is None:
                 continue
             if speed is None:
-                self._deliver(w, len(w))
+                self._deliver(w, len(w), self._interrupted)
                 continue
             now = time.monotonic()
             if reanchor:
@@ -664,7 +683,7 @@ class ReplaySource:
             while k < due:      # blocks of at most DELIVERY_PERIOD_S of device time
                 k_end = max(k + 1, int(np.searchsorted(w.timeline, w.timeline[k] + DELIVERY_PERIOD_S,
                                                        side="left")))
-                k = self._deliver(w, min(k_end, due))
+                k = self._deliver(w, min(k_end, due), self._interrupted)
                 if self._interrupted():
                     break
             if k < len(w) and k >= due:
@@ -674,6 +693,9 @@ class ReplaySource:
                 with self._cv:
                     if not self._closed and not self._ops and not self._reanchor and self._playing:
                         self._cv.wait(max(0.0, wake - time.monotonic()))
+
+    def _closing(self) -> bool:
+        return self._closed
 
     def _interrupted(self) -> bool:
         with self._cv:
@@ -706,9 +728,10 @@ class ReplaySource:
             self._finished.clear()
             self._notify("up", "")
 
-    def _deliver(self, w: _Window, k_end: int) -> int:
-        blocks = self._reader.blocks(w, w.k, k_end)
-        for block in blocks:
+    def _deliver(self, w: _Window, k_end: int, stop: Callable[[], bool] | None = None) -> int:
+        """Deliver merged frames w.k .. k_end block by block: stats first, then the
+        subscribers; `stop()` is asked after each block.  Returns the index reached."""
+        for k, block in self._reader.runs(w, w.k, k_end):
             self.stats.update(block)
             for cb in list(self._subscribers):
                 try:
@@ -716,10 +739,12 @@ class ReplaySource:
                 except Exception:
                     self.subscriber_errors += 1
                     log.exception("replay subscriber %r failed", cb)
-        self.frames_delivered += k_end - w.k
-        self._position = float(w.timeline[k_end - 1])
-        w.k = k_end
-        return k_end
+            self.frames_delivered += k - w.k
+            self._position = float(w.timeline[k - 1])
+            w.k = k
+            if stop is not None and k < k_end and stop():
+                break
+        return w.k
 
     def _operation(self, kind: str, arg: Any) -> None:
         if kind == "seek":
@@ -751,7 +776,7 @@ class ReplaySource:
                     return
                 main = np.flatnonzero(w.track[w.k:] == self._reader.main)[:remaining]
                 if len(main) == remaining:
-                    self._deliver(w, w.k + int(main[-1]) + 1)
+                    self._deliver(w, w.k + int(main[-1]) + 1, self._closing)
                     return
                 remaining -= len(main)
-                self._deliver(w, len(w))
+                self._deliver(w, len(w), self._closing)
