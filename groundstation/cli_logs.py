@@ -75,6 +75,49 @@ def _cmd_record(args) -> int:
             sim.stop()
 
 
+def _cmd_log(args) -> int:
+    from .logs import LogReader, export_csv, export_mat
+
+    if args.action == "info":
+        with LogReader(args.file) as r:
+            info = r.summary()
+            print(info.format())
+            for packet in r.packets():
+                chans = r.channels(packet)
+                print(f"  {packet}: " + ", ".join(
+                    f"{c.name} [{c.units}]" if c.units else c.name
+                    for c in chans if c.kind in ("eng", "flag", "text")))
+            journal = r.journal()
+            kinds: dict[str, int] = {}
+            for rec in journal:
+                kinds[rec.kind] = kinds.get(rec.kind, 0) + 1
+            print("  journal: " + (", ".join(f"{n} {k}" for k, n in kinds.items()) or "empty"))
+            for rec in r.journal(["parameter_table", "note"]):
+                print(f"    {rec.kind}: {rec.data}")
+            if "EVENT" in r.packets() and r.n_frames("EVENT"):
+                ev = r.read("EVENT", ["level", "code", "text"])
+                print(f"  events ({len(ev['text'])}):")
+                for t, lvl, code, text in zip(ev["device_time"], ev["level"], ev["code"], ev["text"]):
+                    print(f"    t={t:10.3f} s level {int(lvl)} code {int(code)}: {text}")
+        return 0
+    if args.action == "export":
+        out = Path(args.output) if args.output else Path(args.file).with_suffix(
+            ".csv" if args.format == "csv" else ".mat")
+        channels = args.channels.split(",") if args.channels else None
+        with LogReader(args.file) as r:
+            fn = export_csv if args.format == "csv" else export_mat
+            rows = fn(r, out, args.packet, channels, start=args.start, stop=args.stop,
+                      timebase=args.timebase, relative=args.relative)
+        print(f"wrote {rows} rows of {args.packet} to {out}")
+        return 0
+    if args.action == "redecode":
+        from .logs.redecode import redecode
+        counts = redecode(args.file, args.output, load_dictionary(args.protocol_dir))
+        print(f"wrote {args.output}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
+        return 0
+    raise GroundStationError(f"unknown log action {args.action}")
+
+
 def add_parsers(sub) -> None:
     s = sub.add_parser("record", help="record a session to HDF5 (from the simulator or a rig)")
     s.add_argument("--device", default="sim",
@@ -88,3 +131,23 @@ def add_parsers(sub) -> None:
     s.add_argument("--rollover-min", type=float, default=0.0, help="start a new file after this time")
     s.add_argument("--take-over", action="store_true", help="take the session from another host")
     s.set_defaults(func=_cmd_record)
+
+    s = sub.add_parser("log", help="inspect, export or re-decode a recorded log")
+    lsub = s.add_subparsers(dest="action", required=True)
+    a = lsub.add_parser("info", help="packets, channels, duration, drops, parameters, events")
+    a.add_argument("file")
+    a = lsub.add_parser("export", help="channels of one packet to CSV or MATLAB .mat")
+    a.add_argument("file")
+    a.add_argument("--format", choices=["csv", "mat"], default="csv")
+    a.add_argument("--packet", default="HIGH_RATE")
+    a.add_argument("--channels", default="", help="comma-separated (default: all)")
+    a.add_argument("--from", dest="start", type=float, default=None, help="start time, s")
+    a.add_argument("--to", dest="stop", type=float, default=None, help="end time, s")
+    a.add_argument("--timebase", choices=["device", "host"], default="device")
+    a.add_argument("--relative", action="store_true",
+                   help="--from/--to count from the start of the log")
+    a.add_argument("-o", "--output", default=None, help="output file (default: beside the log)")
+    a = lsub.add_parser("redecode", help="decode the recorded frames again with another dictionary")
+    a.add_argument("file")
+    a.add_argument("output")
+    s.set_defaults(func=_cmd_log)

@@ -222,14 +222,17 @@ class LogFile:
             _append(g["host_time"], host)
             fg = frames[name]
             if pkt.variable_item is None:
-                raw = np.concatenate([b.raw for b in group])
+                # concatenate the bytes, not the records: numpy would convert big-endian
+                # records to native order, and the frames must stay as received
+                frame_bytes = np.concatenate([b.raw.view(np.uint8).reshape(len(b), -1) for b in group])
+                raw = frame_bytes.view(group[0].raw.dtype).reshape(-1)
                 for item in pkt.items:
                     _append(g[item.name], cat[item.name])
                     if item.has_conversion:
                         _append(g["raw"][item.name], raw[item.name].astype(item.wire_dtype.newbyteorder("=")))
                     for flag in item.bits:
                         _append(g[flag], cat[flag])
-                _append(fg["data"], raw.view(np.uint8).reshape(len(raw), -1))
+                _append(fg["data"], frame_bytes)
             else:
                 for item in pkt.items:
                     if item.is_variable:
