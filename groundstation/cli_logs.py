@@ -118,6 +118,30 @@ def _cmd_log(args) -> int:
     raise GroundStationError(f"unknown log action {args.action}")
 
 
+def _cmd_replay(args) -> int:
+    from .link import format_snapshot
+    from .logs import ReplaySource
+
+    speed = None if args.speed == "max" else float(args.speed)
+    with ReplaySource(args.file, speed=speed) as src:
+        if args.start is not None:
+            src.seek(args.start)
+        print(f"replaying {args.file}: {src.duration:.1f} s of device time at "
+              f"{'full speed' if speed is None else f'{speed:g}x'}", flush=True)
+        src.play()
+        try:
+            while not src.wait_finished(args.interval):
+                print(f"t={src.position:9.3f} s | {format_snapshot(src.stats.snapshot())}", flush=True)
+        except KeyboardInterrupt:
+            src.pause()
+        snap = src.stats.snapshot()
+        print(f"end t={src.position:.3f} s | {format_snapshot(snap)}", flush=True)
+        for name, ps in sorted(snap.packets.items()):
+            print(f"  {name:<13} {ps.frames:>9} frames, {ps.dropped} dropped in "
+                  f"{sum(1 for g in snap.gap_events if g[1] == name)} gap(s)")
+    return 0
+
+
 def add_parsers(sub) -> None:
     s = sub.add_parser("record", help="record a session to HDF5 (from the simulator or a rig)")
     s.add_argument("--device", default="sim",
@@ -151,3 +175,10 @@ def add_parsers(sub) -> None:
     a.add_argument("file")
     a.add_argument("output")
     s.set_defaults(func=_cmd_log)
+
+    s = sub.add_parser("replay", help="replay a log through the live-link interface (headless statistics)")
+    s.add_argument("file")
+    s.add_argument("--speed", default="max", help="0.1 to 50 (x real time) or max (default)")
+    s.add_argument("--from", dest="start", type=float, default=None, help="start at this device time, s")
+    s.add_argument("--interval", type=float, default=1.0, help="seconds between status lines")
+    s.set_defaults(func=_cmd_replay)

@@ -57,6 +57,10 @@ def test_record_info_export_and_redecode(tmp_path):
     m = scipy.io.loadmat(mat, squeeze_me=True, struct_as_record=False)
     assert len(m["HIGH_RATE"].encoder_outer) == n
 
+    rp = gs("replay", str(log))                     # headless: the link statistics
+    assert rp.returncode == 0, rp.stderr
+    assert f"HIGH_RATE {n} frames, 0 dropped in 0 gap(s)" in " ".join(rp.stdout.split())
+
     # a newer dictionary that scales the coarse current 2x: same frames, new values
     proto = tmp_path / "protocol"
     shutil.copytree(ROOT / "protocol", proto)

@@ -68,7 +68,11 @@ def _expected(fed: list[TelemetryBlock], packet: str) -> dict[str, np.ndarray]:
     out["host_time"] = np.concatenate([np.broadcast_to(b.host_time, (len(b),)) for b in blocks])
     out["device_time"] = out["tick"].astype(np.int64) / 1200.0     # no wrap in a short run
     if blocks[0].raw is not None:
+        # field values (numpy converts the records to native order when concatenating)
         out["__raw__"] = np.concatenate([b.raw for b in blocks])
+        # the frames as received, in wire byte order
+        out["__wire__"] = np.frombuffer(b"".join(b.raw.tobytes() for b in blocks),
+                                        np.uint8).reshape(len(out["__raw__"]), -1)
     else:
         out["__frames__"] = [f for b in blocks for f in b.frames]
     return out
@@ -127,7 +131,8 @@ def test_raw_counts_and_frames_are_the_wire_values(session, reader):
         np.testing.assert_array_equal(reader.read("HIGH_RATE", f"raw/{name}")[f"raw/{name}"], raw[name])
     frames = reader.frames("HIGH_RATE")
     assert frames.shape == (len(raw), raw.dtype.itemsize) and frames.dtype == np.uint8
-    assert frames.tobytes() == raw.tobytes()
+    np.testing.assert_array_equal(frames, exp["__wire__"])
+    assert bytes(frames[0, :2]) == b"\xeb\x90"             # wire byte order: sync first
     np.testing.assert_array_equal(reader.frames("HIGH_RATE", 100, 103), frames[100:103])
     assert reader.frames("EVENT") == _expected(fed, "EVENT")["__frames__"]
     assert reader.is_variable("EVENT") and not reader.is_variable("HIGH_RATE")

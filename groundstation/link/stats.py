@@ -112,6 +112,17 @@ class LinkStatistics:
         self._framing_sources: list[FramingCounters] = []
         self._started = time.monotonic()
 
+    def reset(self) -> None:
+        """Forget the packet counts, rates, latencies and gaps (e.g. after a replay seeks:
+        the jump is not a drop).  Framing counters belong to their decoders and stay."""
+        with self._lock:
+            self._packets.clear()
+            self._arrivals.clear()
+            self._latency.clear()
+            self._unwrap.clear()
+            self._gaps.clear()
+            self._started = time.monotonic()
+
     def add_framing_source(self, counters: FramingCounters) -> None:
         with self._lock:
             self._framing_sources.append(counters)

@@ -4,6 +4,8 @@ from .export import export_csv, export_mat
 from .h5file import LogFile
 from .reader import LogError, LogFormatError, LogQueryError, LogReader
 from .recorder import Recorder, RecorderError, RecorderStatus, log_path
+from .replay import ReplayError, ReplaySource, iter_blocks
 
 __all__ = ["LogError", "LogFile", "LogFormatError", "LogQueryError", "LogReader", "Recorder",
-           "RecorderError", "RecorderStatus", "export_csv", "export_mat", "log_path"]
+           "RecorderError", "RecorderStatus", "ReplayError", "ReplaySource", "export_csv",
+           "export_mat", "iter_blocks", "log_path"]

@@ -36,6 +36,9 @@ KINDS = ("header", "eng", "flag", "raw", "text")
 _SCAN_ROWS = 1 << 20            # rows per read when a whole column must be scanned
 
 
+TIME_TOLERANCE_S = 1e-9
+
+
 class LogError(GroundStationError):
     """A log cannot be opened or a request to it cannot be answered (message says why)."""
 
@@ -451,8 +454,10 @@ class LogReader:
             raise LogQueryError(f"range start {start} s is after its stop {stop} s")
         n = self.n_frames(packet)
         shift = self.origin(timebase) if relative else 0.0
-        i0 = 0 if start is None else _search(ds, n, start + shift, "left")
-        i1 = n if stop is None else _search(ds, n, stop + shift, "right")
+        # times are whole ticks (or arrival stamps); a bound computed as origin + 0.5 s can
+        # miss a tick by one rounding step, so bounds admit what is within 1 ns of them
+        i0 = 0 if start is None else _search(ds, n, start + shift - TIME_TOLERANCE_S, "left")
+        i1 = n if stop is None else _search(ds, n, stop + shift + TIME_TOLERANCE_S, "right")
         return i0, max(i0, i1)
 
     def tick_index_range(self, packet: str, tick_start: int | None,

@@ -51,6 +51,7 @@ import numpy as np
 from ..codec import FrameCodec, TelemetryBlock
 from ..dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, PacketDef, load_dictionary
 from ..errors import GroundStationError
+from .reader import LogError
 from ..link.stats import LinkStatistics
 from . import schema
 
@@ -62,7 +63,7 @@ DELIVERY_PERIOD_S = 1.0 / 60.0     # worker wake-up period and device time per p
 MAIN_PACKET = "HIGH_RATE"
 
 
-class ReplayError(GroundStationError):
+class ReplayError(LogError):
     """A log cannot be replayed (missing file, not a log, unreadable protocol, ...)."""
 
 
@@ -123,8 +124,7 @@ def _log_dictionary(f: h5py.File, path: Path) -> Dictionary:
 class _Track:
     """The recorded frames of one packet, read through a cursor a chunk at a time."""
 
-    def __init__(self, f: h5py.File, pkt: PacketDef, index: int, chunk_rows: int,
-                 sync: int):
+    def __init__(self, f: h5py.File, pkt: PacketDef, index: int, chunk_rows: int):
         self.pkt = pkt
         self.index = index
         self.rank = pkt.id
@@ -133,8 +133,6 @@ class _Track:
         self.host_ds = g["host_time"]
         self.dev_ds = f["telemetry"][pkt.name]["device_time"]
         self.fixed = pkt.variable_item is None
-        self.pkt_sync = sync
-        self.warned_order = False
         if self.fixed:
             self.data_ds = g["data"]
             width = pkt.fixed_payload_size + HEADER_SIZE + CRC_SIZE
@@ -202,7 +200,8 @@ class _Track:
         return True
 
     def take(self, count: int) -> tuple[int, np.ndarray, np.ndarray, np.ndarray]:
-        row, keys, dev, host = self.buf_row, self.buf_keys[:count], self.buf_dev[:count], self.buf_host[:count]
+        row = self.buf_row
+        keys, dev, host = self.buf_keys[:count], self.buf_dev[:count], self.buf_host[:count]
         self.buf_keys, self.buf_dev, self.buf_host = (self.buf_keys[count:], self.buf_dev[count:],
                                                       self.buf_host[count:])
         self.buf_row += count
@@ -211,28 +210,12 @@ class _Track:
     def read(self, row: int, count: int) -> np.ndarray | list[bytes]:
         """The raw frames of rows [row, row + count)."""
         if self.fixed:
-            return self._wire_order(self.data_ds[row:row + count])
+            return self.data_ds[row:row + count]
         off = self.off_ds[row:row + count].astype(np.int64)
         ln = self.len_ds[row:row + count].astype(np.int64)
         base = int(off[0])
         blob = self.data_ds[base:int(off[-1] + ln[-1])].tobytes()
         return [blob[o - base:o - base + n] for o, n in zip(off.tolist(), ln.tolist())]
-
-    def _wire_order(self, data: np.ndarray) -> np.ndarray:
-        """Rows as received.  Logs written before h5file stored the frames via a numpy
-        concatenation (which turns big-endian records into native order) hold the records
-        byte-swapped field by field; their sync word reads 90 EB: swap them back."""
-        sync = self.pkt_sync
-        swapped = (data[:, 0] == (sync & 0xFF)) & (data[:, 1] == (sync >> 8))
-        if swapped.any():
-            if not self.warned_order:
-                self.warned_order = True
-                log.warning("%s frames are stored in host byte order (log written by an older "
-                            "recorder); converting them to wire order", self.pkt.name)
-            native = np.ascontiguousarray(data[swapped]).view(self.pkt.frame_dtype.newbyteorder("="))
-            data[swapped] = native.astype(self.pkt.frame_dtype).view(np.uint8).reshape(
-                -1, data.shape[1])
-        return data
 
 
 def _bisect_ds(ds: h5py.Dataset, n: int, value: float, right: bool = False) -> int:
@@ -284,7 +267,7 @@ class _LogReader:
                 if pkt.name not in self.f["frames"] or pkt.name not in self.f["telemetry"]:
                     continue
                 rows = max(256, int((pkt.rate_hz or 0) * chunk_seconds))
-                self.tracks.append(_Track(self.f, pkt, len(self.tracks), rows, self.dictionary.sync))
+                self.tracks.append(_Track(self.f, pkt, len(self.tracks), rows))
             if not self.tracks:
                 raise ReplayError(f"{self.path}: no recorded packet is known to the dictionary")
             names = [t.pkt.name for t in self.tracks]
@@ -324,6 +307,7 @@ class _LogReader:
     def locate(self, device_time: float) -> tuple[list[int], float | None]:
         """Rows per track where the merged order reaches the first main-packet frame at or
         after `device_time`, and that frame's device time (None beyond the end)."""
+        self.refresh()                      # a growing log: seek into what is there now
         main = self.main_track
         r = _bisect_ds(main.dev_ds, main.n_rows, device_time)
         if r >= main.n_rows:
@@ -455,6 +439,11 @@ class ReplaySource:
     to the worker, which does all the file I/O and calls the subscribers).  Listeners
     get ('finished', '') at the end, ('up', '') when a seek or play leaves the end, ('lost',
     message) if the file fails while playing, and ('closed', '') on close().
+
+    `stats` is fed every block before the subscribers, so the sequence gaps recorded
+    live count as the same drops and gap events (with their recorded arrival times).  A
+    seek resets it (a jump is not a drop).  play() at the end looks
+    for rows a recorder appended since; to play again from the start, seek first.
     """
 
     def __init__(self, path: str | Path, *, dictionary: Dictionary | None = None,
@@ -516,6 +505,7 @@ class ReplaySource:
             self._cv.notify_all()
 
     def pause(self) -> None:
+        """Stop after the block being delivered; the position is kept."""
         with self._cv:
             self._playing = False
             self._cv.notify_all()
@@ -751,7 +741,7 @@ class ReplaySource:
             rows, landed = self._reader.locate(arg)
             self._reader.reset(rows)
             self._window = None
-            self.stats = LinkStatistics(self.dictionary.control_rate_hz)
+            self.stats.reset()
             rng = self._reader.time_range()
             if rng:
                 self._start_time, self._end_time = rng
