@@ -11,7 +11,7 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).parent
-BENCHES = ["bench_codec.py", "bench_sim.py"]
+BENCHES = ["bench_codec.py", "bench_sim.py", "bench_logs.py"]
 
 if __name__ == "__main__":
     for name in BENCHES:

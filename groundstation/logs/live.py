@@ -12,8 +12,9 @@ UNJOURNALED = {"HEARTBEAT"}
 
 
 def attach_recorder(client: DeviceClient, recorder: Recorder) -> None:
-    """Subscribe the recorder to the client's telemetry, journal every command, and
-    journal the link statistics once a second (drops and CRC errors with their times)."""
+    """Subscribe the recorder to the client's telemetry, journal every command and every
+    link state change, and the link statistics once a second (drops and CRC errors with
+    their times)."""
     if recorder.link_stats is None:
         recorder.link_stats = client.stats.snapshot
     client.subscribe(recorder)
@@ -26,3 +27,5 @@ def attach_recorder(client: DeviceClient, recorder: Recorder) -> None:
         t = result.stages[0].host_time if result.stages else None
         recorder.record("command", record, at=t)
     client.add_command_listener(journal_command)
+    client.add_link_listener(lambda state, message: recorder.record(
+        "event", {"source": "link", "state": state, "message": message}))
