@@ -1,0 +1,197 @@
+"""Decoded telemetry kept for display: per-packet ring buffers of the last N seconds.
+
+`TelemetryStore` is a subscriber (live link or replay): the receiver thread appends
+whole blocks under a lock (a few numpy slice copies, no per-sample Python); the GUI
+takes snapshots of the channels it shows on its own timer.  Sequence gaps are kept as
+marks so a chart can show them instead of drawing a line across lost data.
+
+No Qt here: the GUI and tests use the same store.
+"""
+
+from __future__ import annotations
+
+import threading
+from dataclasses import dataclass
+
+import numpy as np
+
+from .codec import TelemetryBlock
+from .dictionary import Dictionary, PacketDef
+from .link.stats import SEQ_MOD, TickUnwrapper
+
+
+@dataclass
+class Snapshot:
+    """Copies of the newest samples of some channels (oldest first)."""
+
+    device_time: np.ndarray        # s since the device booted
+    host_time: np.ndarray          # s since the epoch
+    values: dict[str, np.ndarray]
+    gap_device_times: np.ndarray   # device time of the first frame after each gap
+    gap_sizes: np.ndarray          # frames missing in each gap
+    total_frames: int
+
+
+class PacketRing:
+    """Ring buffer of one packet's numeric channels."""
+
+    def __init__(self, packet: PacketDef, capacity: int, tick_rate_hz: float):
+        self.packet = packet
+        self.capacity = capacity
+        self.rate = tick_rate_hz
+        self.channels = [c for c in packet.channel_names() if not self._is_text(packet, c)]
+        self._data = {c: np.full(capacity, np.nan) for c in self.channels}
+        self._device_time = np.full(capacity, np.nan)
+        self._host_time = np.full(capacity, np.nan)
+        self._head = 0                 # next write position
+        self._count = 0                # valid samples (<= capacity)
+        self.total_frames = 0
+        self._last_seq: int | None = None
+        self._unwrap = TickUnwrapper()
+        self._gaps: list[tuple[float, int]] = []
+        self._lock = threading.Lock()
+
+    @staticmethod
+    def _is_text(packet: PacketDef, name: str) -> bool:
+        item = packet.item_by_name.get(name)
+        return item is not None and item.is_variable
+
+    def append(self, block: TelemetryBlock) -> None:
+        n = len(block)
+        if not n:
+            return
+        seq = block.columns["sequence"].astype(np.int64)
+        dev = self._unwrap.unwrap(block.columns["tick"]) / self.rate
+        prev = np.concatenate(([self._last_seq if self._last_seq is not None else seq[0] - 1], seq[:-1]))
+        step = (seq - prev) % SEQ_MOD
+        lost = np.flatnonzero((step > 1) & (step < SEQ_MOD // 2))
+        host = np.broadcast_to(np.asarray(block.host_time, dtype=np.float64), (n,))
+        with self._lock:
+            self._last_seq = int(seq[-1])
+            self.total_frames += n
+            for i in lost.tolist():
+                self._gaps.append((float(dev[i]), int(step[i] - 1)))
+            if len(self._gaps) > 10000:
+                del self._gaps[:-10000]
+            if n >= self.capacity:                     # keep only the newest capacity
+                sl = slice(n - self.capacity, n)
+                self._write(0, sl, block, dev, host)
+                self._head, self._count = 0, self.capacity
+                return
+            first = min(n, self.capacity - self._head)
+            self._write(self._head, slice(0, first), block, dev, host)
+            if first < n:
+                self._write(0, slice(first, n), block, dev, host)
+            self._head = (self._head + n) % self.capacity
+            self._count = min(self.capacity, self._count + n)
+
+    def _write(self, at: int, src: slice, block: TelemetryBlock, dev, host) -> None:
+        k = src.stop - src.start
+        self._device_time[at:at + k] = dev[src]
+        self._host_time[at:at + k] = host[src]
+        for c in self.channels:
+            self._data[c][at:at + k] = block.columns[c][src]
+
+    def snapshot(self, channels: list[str], seconds: float | None = None) -> Snapshot:
+        """The newest `seconds` of device time (all that is kept if None)."""
+        with self._lock:
+            order = self._order()
+            dev = self._device_time[order]
+            if seconds is not None and len(dev):
+                start = int(np.searchsorted(dev, dev[-1] - seconds, side="left"))
+                order, dev = order[start:], dev[start:]
+            values = {c: self._data[c][order] for c in channels if c in self._data}
+            host = self._host_time[order]
+            gaps = np.array(self._gaps, dtype=np.float64).reshape(-1, 2)
+            total = self.total_frames
+        if len(dev):
+            keep = gaps[:, 0] >= dev[0]
+            gaps = gaps[keep]
+        return Snapshot(dev, host, values, gaps[:, 0], gaps[:, 1].astype(np.int64), total)
+
+    def _order(self) -> np.ndarray:
+        if self._count < self.capacity:
+            return np.arange(self._count)
+        return (np.arange(self.capacity) + self._head) % self.capacity
+
+    def clear(self) -> None:
+        with self._lock:
+            self._head = self._count = 0
+            self.total_frames = 0
+            self._last_seq = None
+            self._unwrap = TickUnwrapper()
+            self._gaps.clear()
+
+    def latest(self, channel: str) -> float | None:
+        with self._lock:
+            if not self._count:
+                return None
+            return float(self._data[channel][(self._head - 1) % self.capacity])
+
+
+class TelemetryStore:
+    """Ring buffers for every device-to-host packet; call it with each block."""
+
+    def __init__(self, dictionary: Dictionary, seconds: float = 600.0):
+        self.dictionary = dictionary
+        self.rings: dict[str, PacketRing] = {}
+        for p in dictionary.packets:
+            if p.direction != "device_to_host" or p.name == "RESPONSE":
+                continue
+            rate = p.rate_hz or 10.0
+            cap = max(1024, int(seconds * rate * 1.05))
+            self.rings[p.name] = PacketRing(p, cap, dictionary.control_rate_hz)
+
+    def __call__(self, block: TelemetryBlock) -> None:
+        ring = self.rings.get(block.name)
+        if ring is not None:
+            ring.append(block)
+
+    def ring(self, packet: str) -> PacketRing:
+        return self.rings[packet]
+
+    def clear(self) -> None:
+        for r in self.rings.values():
+            r.clear()
+
+
+def peak_decimate(x: np.ndarray, y: np.ndarray, bins: int) -> tuple[np.ndarray, np.ndarray, bool]:
+    """Min/max per bin, so a one-sample spike survives any zoom level.
+
+    Returns (x, y, decimated): with more samples than 2*bins, each bin of consecutive
+    samples becomes two points at the bin's first x, its min then its max.  NaN marks a
+    gap and survives: a bin holding a NaN yields NaN, so the chart does not bridge it."""
+    n = len(y)
+    if bins <= 0 or n <= 2 * bins:
+        return x, y, False
+    per = int(np.ceil(n / bins))
+    m = n // per
+    yb = y[:m * per].reshape(m, per)
+    with np.errstate(invalid="ignore"):
+        lo = np.nanmin(np.where(np.isnan(yb), np.inf, yb), axis=1)
+        hi = np.nanmax(np.where(np.isnan(yb), -np.inf, yb), axis=1)
+    has_gap = np.isnan(yb).any(axis=1)
+    lo[has_gap] = np.nan
+    hi[has_gap] = np.nan
+    xb = x[:m * per:per]
+    xs = np.repeat(xb, 2)
+    ys = np.empty(2 * m)
+    ys[0::2], ys[1::2] = lo, hi
+    if m * per < n:                                 # the tail bin, exactly
+        tail = y[m * per:]
+        xs = np.concatenate([xs, x[m * per:m * per + 1].repeat(2)])
+        ys = np.concatenate([ys, [np.nanmin(tail) if not np.isnan(tail).any() else np.nan,
+                                  np.nanmax(tail) if not np.isnan(tail).any() else np.nan]])
+    return xs, ys, True
+
+
+def with_gap_breaks(t: np.ndarray, y: np.ndarray, gap_times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Insert a NaN before every sample that follows a sequence gap, so a line plot
+    (connect='finite') shows a break where frames were lost."""
+    if not len(gap_times) or not len(t):
+        return t, y
+    idx = np.searchsorted(t, gap_times, side="left")
+    idx = idx[(idx > 0) & (idx < len(t))]
+    if not len(idx):
+        return t, y
+    return np.insert(t, idx, t[idx]), np.insert(y.astype(np.float64), idx, np.nan)

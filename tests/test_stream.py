@@ -1,0 +1,60 @@
+"""Ring buffers for display, peak-keeping decimation, gap breaks."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from groundstation.codec import FrameCodec
+from groundstation.stream import TelemetryStore, peak_decimate, with_gap_breaks
+
+
+def hr_block(codec, seq, values=None):
+    seq = np.asarray(seq)
+    data = codec.encode("HIGH_RATE", values or {"encoder_outer": seq * 1e-6}, seq, seq)
+    return codec.decode_frame(data[:78], 1.0) if len(seq) == 1 else _decode(codec, data)
+
+
+def _decode(codec, data):
+    from groundstation.codec import StreamDeframer
+    return StreamDeframer(codec).feed(data, 5.0)[0]
+
+
+def test_ring_keeps_the_newest_and_marks_gaps(dictionary):
+    codec = FrameCodec(dictionary)
+    store = TelemetryStore(dictionary, seconds=1.0)        # 1260 HIGH_RATE samples
+    ring = store.ring("HIGH_RATE")
+    store(hr_block(codec, np.arange(0, 1000)))
+    store(hr_block(codec, np.arange(1010, 2000)))            # 10 frames lost
+    snap = ring.snapshot(["encoder_outer"])
+    assert len(snap.device_time) == ring.capacity
+    assert snap.device_time[-1] == 1999 / 1200 and np.all(np.diff(snap.device_time) > 0)
+    assert np.allclose(snap.values["encoder_outer"], snap.device_time * 1200 * 1e-6)
+    assert list(snap.gap_sizes) == [10] and snap.gap_device_times[0] == 1010 / 1200
+    assert snap.total_frames == 1990
+    last = ring.snapshot(["encoder_outer"], seconds=0.1)
+    assert len(last.device_time) == 121
+    assert abs(ring.latest("encoder_outer") - 1999e-6) < 1.5e-9     # one encoder count
+    big = TelemetryStore(dictionary, seconds=0.5)
+    big(hr_block(codec, np.arange(5000)))                    # one block larger than the ring
+    assert big.ring("HIGH_RATE").snapshot(["tick"]).values["tick"][-1] == 4999
+
+
+def test_peak_decimation_keeps_a_one_sample_spike():
+    x = np.arange(1_000_000) / 1200.0
+    y = np.zeros_like(x)
+    y[654_321] = 5.0
+    y[10] = -2.0
+    xs, ys, dec = peak_decimate(x, y, 800)
+    assert dec and len(ys) <= 2 * 800 + 2
+    assert ys.max() == 5.0 and ys.min() == -2.0
+    small_x, small_y, dec = peak_decimate(x[:100], y[:100], 800)
+    assert not dec and len(small_y) == 100
+
+
+def test_gaps_survive_decimation_and_break_the_line():
+    t = np.arange(20.0)
+    y = np.ones(20)
+    tb, yb = with_gap_breaks(t, y, np.array([10.0]))
+    assert np.isnan(yb[10]) and len(yb) == 21 and tb[10] == tb[11] == 10.0
+    xs, ys, _ = peak_decimate(tb, yb, 4)
+    assert np.isnan(ys).any()
