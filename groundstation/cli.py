@@ -118,9 +118,23 @@ def _cmd_monitor(args) -> int:
 
 
 def _cmd_run(args) -> int:
-    print("live link statistics of the simulated testbed (Ctrl-C to stop)", flush=True)
+    """The main job: the window on the simulated testbed, or a headless view without a screen."""
+    from .gui.app import display_available, run_gui
+
+    if display_available():
+        return run_gui(load_dictionary(args.protocol_dir), connect="sim", testbed=args.testbed)
+    print("no display (DISPLAY/WAYLAND_DISPLAY unset): falling back to the headless live "
+          "view of the simulated testbed (Ctrl-C to stop)", flush=True)
     args.device = "sim"
     return _cmd_monitor(args)
+
+
+def _cmd_gui(args) -> int:
+    from .gui.app import run_gui
+
+    connect = None if args.device == "none" else args.device
+    return run_gui(load_dictionary(args.protocol_dir), connect=connect, testbed=args.testbed,
+                   replay=args.replay)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -161,6 +175,11 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--take-over", action="store_true",
                        help="take the session over from another host")
         s.set_defaults(func=_cmd_monitor if name == "monitor" else _cmd_run)
+    s = sub.add_parser("gui", help="the operator's window")
+    s.add_argument("--device", default="sim", help="sim | tcp://HOST:PORT | serial://PORT | none")
+    s.add_argument("--testbed", default=None, help="testbed file for --device sim")
+    s.add_argument("--replay", default=None, help="open this log in replay instead")
+    s.set_defaults(func=_cmd_gui)
     cli_logs.add_parsers(sub)
     return p
 

@@ -1,0 +1,1 @@
+"""The operator's window (PySide6 + pyqtgraph).  Only this package imports Qt."""

@@ -1,0 +1,174 @@
+"""The operator's window: strip charts in the middle, panels in docks, Abort on Esc."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from PySide6.QtCore import QByteArray, QSettings, Qt
+from PySide6.QtGui import QAction, QKeySequence, QShortcut
+from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QMessageBox, QToolBar
+
+from ..sim.testbed import TESTBEDS_DIR
+from .channel_tree import ChannelTree
+from .charts import StripChartPanel
+from .panels import CommandPanel, ConnectionBar, EventLog, RecordingPanel, ReplayBar, StatusPanel
+from .session import Session
+from .spectrum import SpectrumView
+
+DEFAULT_LAYOUT = [["HIGH_RATE.encoder_outer", "HIGH_RATE.encoder_inner"],
+                  ["HIGH_RATE.los_estimate", "HIGH_RATE.reference"],
+                  ["HIGH_RATE.gyro_rate"],
+                  ["HIGH_RATE.current_coarse", "HIGH_RATE.current_fine"]]
+
+
+class MainWindow(QMainWindow):
+    def __init__(self, session: Session, settings: QSettings | None = None):
+        super().__init__()
+        self.session = session
+        self.settings = settings or QSettings("groundstation", "groundstation")
+        self.setWindowTitle("Ground station - hybrid flexure bearing testbed")
+        self.setAcceptDrops(True)
+        d = session.d
+        testbeds = [str(p.relative_to(TESTBEDS_DIR.parent.parent)) if p.is_relative_to(TESTBEDS_DIR.parent.parent)
+                    else str(p) for p in sorted(TESTBEDS_DIR.glob("*.toml"))]
+        self.connection = ConnectionBar(session, testbeds)
+        bar = QToolBar("Connection")
+        bar.setObjectName("connection_bar")
+        bar.addWidget(self.connection)
+        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, bar)
+        self.replay_bar = ReplayBar(session)
+        self.replay_toolbar = QToolBar("Replay")
+        self.replay_toolbar.setObjectName("replay_bar")
+        self.replay_toolbar.addWidget(self.replay_bar)
+        self.addToolBar(Qt.ToolBarArea.BottomToolBarArea, self.replay_toolbar)
+        self.replay_toolbar.setVisible(False)
+
+        self.charts = StripChartPanel(session.store, d)
+        self.setCentralWidget(self.charts)
+        self.tree = ChannelTree(d)
+        self.tree.sig_channel_activated.connect(lambda cid: self.charts.add_channel(cid))
+        self.status_panel = StatusPanel(session)
+        self.commands = CommandPanel(session)
+        self.commands.sig_abort.connect(self.abort)
+        self.recording = RecordingPanel(session)
+        self.events = EventLog(session)
+        self.spectrum = SpectrumView(session.store, d)
+        self.docks = {}
+        for name, widget, area in (("Channels", self.tree, Qt.DockWidgetArea.LeftDockWidgetArea),
+                                   ("Commands", self.commands, Qt.DockWidgetArea.RightDockWidgetArea),
+                                   ("Status and limits", self.status_panel, Qt.DockWidgetArea.RightDockWidgetArea),
+                                   ("Recording", self.recording, Qt.DockWidgetArea.LeftDockWidgetArea),
+                                   ("Events", self.events, Qt.DockWidgetArea.BottomDockWidgetArea),
+                                   ("Spectrum", self.spectrum, Qt.DockWidgetArea.BottomDockWidgetArea)):
+            dock = QDockWidget(name)
+            dock.setObjectName(name.lower().replace(" ", "_"))
+            dock.setWidget(widget)
+            self.addDockWidget(area, dock)
+            self.docks[name] = dock
+        self.tabifyDockWidget(self.docks["Events"], self.docks["Spectrum"])
+        self.docks["Events"].raise_()
+
+        self.link_label = QLabel("not connected")
+        self.statusBar().addPermanentWidget(self.link_label)
+        session.sig_link_state.connect(lambda s, m: self.link_label.setText(f"link {s} {m}".strip()))
+        session.sig_source.connect(self._source_changed)
+        self._menus()
+        # Abort: one key from anywhere in the application, whatever has the focus
+        self.abort_shortcut = QShortcut(QKeySequence(Qt.Key.Key_Escape), self)
+        self.abort_shortcut.setContext(Qt.ShortcutContext.ApplicationShortcut)
+        self.abort_shortcut.activated.connect(self.abort)
+        self.charts.set_layout(DEFAULT_LAYOUT)
+        self.restore()
+
+    # ------------------------------------------------------------------ menus
+    def _menus(self) -> None:
+        def action(menu, text, slot, shortcut=None):
+            a = QAction(text, self)
+            if shortcut:
+                a.setShortcut(QKeySequence(shortcut))
+            a.triggered.connect(slot)
+            menu.addAction(a)
+            return a
+        m = self.menuBar().addMenu("&File")
+        action(m, "&Open log...", self.open_log_dialog, "Ctrl+O")
+        action(m, "Start/stop &recording", self.recording.toggle, "Ctrl+R")
+        action(m, "Close replay", self.session.close_replay)
+        m.addSeparator()
+        action(m, "&Quit", self.close, "Ctrl+Q")
+        m = self.menuBar().addMenu("&Device")
+        action(m, "Connect to the &simulated testbed", lambda: self.session.connect_sim(
+            self.connection.testbed.currentText() or None), "F5")
+        action(m, "&Disconnect", self.session.disconnect_link, "Shift+F5")
+        action(m, "&ABORT", self.abort)
+        action(m, "&Arm", lambda: self.commands.send("ARM"))
+        action(m, "Dis&arm", lambda: self.commands.send("DISARM"), "Ctrl+D")
+        m = self.menuBar().addMenu("&View")
+        action(m, "&Pause charts", lambda: self.charts.set_paused(not self.charts.paused), "Ctrl+Space")
+        for dock in self.docks.values():
+            m.addAction(dock.toggleViewAction())
+        action(m, "Reset layout", self.reset_layout)
+        m = self.menuBar().addMenu("&Help")
+        action(m, "&About", lambda: QMessageBox.about(
+            self, "Ground station", "Ground station for hybrid-flexure-bearing testbeds.\n"
+            "Esc aborts: both motors to zero, drives off, mode IDLE."))
+
+    # ------------------------------------------------------------------ actions
+    def abort(self) -> None:
+        self.session.abort()
+        self.statusBar().showMessage("ABORT sent", 3000)
+
+    def open_log_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Open log", "", "Logs (*.h5)")
+        if path:
+            self.session.open_log(path)
+
+    def _source_changed(self, kind: str, text: str) -> None:
+        self.replay_toolbar.setVisible(kind == "replay")
+        if kind == "replay":
+            self.setWindowTitle(f"Ground station - replay of {Path(text).name}")
+            self.connection.lamp.setStyleSheet("background:#1565c0; border-radius:7px; min-width:14px; "
+                                               "max-width:14px; min-height:14px; max-height:14px;")
+        else:
+            self.setWindowTitle("Ground station - hybrid flexure bearing testbed")
+
+    def dragEnterEvent(self, event) -> None:
+        if any(u.toLocalFile().endswith(".h5") for u in event.mimeData().urls()):
+            event.acceptProposedAction()
+
+    def dropEvent(self, event) -> None:
+        for url in event.mimeData().urls():
+            if url.toLocalFile().endswith(".h5"):
+                self.session.open_log(url.toLocalFile())
+                break
+
+    # ------------------------------------------------------------------ persistence
+    def restore(self) -> None:
+        geometry = self.settings.value("geometry")
+        if isinstance(geometry, QByteArray):
+            self.restoreGeometry(geometry)
+        else:
+            self.resize(1600, 950)
+        state = self.settings.value("window_state")
+        if isinstance(state, QByteArray):
+            self.restoreState(state)
+        charts = self.settings.value("charts")
+        if isinstance(charts, dict):
+            try:
+                self.charts.restore_state(charts)
+            except (KeyError, TypeError, ValueError):
+                self.charts.set_layout(DEFAULT_LAYOUT)   # settings of an older version
+
+    def save(self) -> None:
+        self.settings.setValue("geometry", self.saveGeometry())
+        self.settings.setValue("window_state", self.saveState())
+        self.settings.setValue("charts", self.charts.state())
+
+    def reset_layout(self) -> None:
+        self.charts.set_layout(DEFAULT_LAYOUT)
+        for dock in self.docks.values():
+            dock.setVisible(True)
+
+    def closeEvent(self, event) -> None:
+        self.save()
+        self.session.shutdown()
+        super().closeEvent(event)

@@ -1,0 +1,412 @@
+"""The operator's panels: connection bar, status and limits, commands with Abort,
+recording, event log, replay bar.  They show models and call Session methods; they do
+no I/O themselves.
+"""
+
+from __future__ import annotations
+
+import time
+from datetime import datetime
+
+from PySide6.QtCore import Qt, QTimer, Signal
+from PySide6.QtGui import QColor, QFont
+from PySide6.QtWidgets import (QCheckBox, QComboBox, QFormLayout, QGridLayout, QHBoxLayout,
+                               QHeaderView, QLabel, QLineEdit, QListWidget, QListWidgetItem,
+                               QMessageBox, QPushButton, QSlider, QTableWidget,
+                               QTableWidgetItem, QVBoxLayout, QWidget)
+
+from ..link import format_snapshot
+from ..monitor import GREEN, RED, YELLOW
+from .session import Session
+
+LAMP = {"up": "#2e7d32", "connecting": "#f9a825", "lost": "#c62828", "failed": "#c62828",
+        "closed": "#616161", "replay": "#1565c0"}
+STATE_COLOURS = {GREEN: QColor("#2e7d32"), YELLOW: QColor("#f9a825"), RED: QColor("#c62828")}
+
+
+def lamp_style(colour: str) -> str:
+    return f"background:{colour}; border-radius:7px; min-width:14px; max-width:14px; min-height:14px; max-height:14px;"
+
+
+class ConnectionBar(QWidget):
+    """Source (simulated testbed, TCP/UDP address, serial port), connect, link health."""
+
+    def __init__(self, session: Session, testbeds: list[str], parent=None):
+        super().__init__(parent)
+        self.session = session
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(4, 2, 4, 2)
+        self.kind = QComboBox()
+        self.kind.addItems(["Simulated testbed", "Ethernet (tcp://host:port)", "Serial port"])
+        self.testbed = QComboBox()
+        self.testbed.addItems(testbeds)
+        self.address = QLineEdit("tcp://127.0.0.1:5020")
+        self.serial = QComboBox()
+        self.serial.setEditable(True)
+        self.baud = QComboBox()
+        self.baud.setEditable(True)
+        self.baud.addItems(["2000000", "3000000", "921600", "115200"])
+        self.connect_button = QPushButton("Connect")
+        self.lamp = QLabel()
+        self.lamp.setStyleSheet(lamp_style(LAMP["closed"]))
+        self.health = QLabel("not connected")
+        for w in (QLabel("Source"), self.kind, self.testbed, self.address, self.serial, self.baud,
+                  self.connect_button, self.lamp):
+            lay.addWidget(w)
+        lay.addWidget(self.health, 1)
+        self.kind.currentIndexChanged.connect(self._kind_changed)
+        self.connect_button.clicked.connect(self._toggle)
+        self._kind_changed()
+        session.sig_link_state.connect(self._link_state)
+        self._timer = QTimer(self)
+        self._timer.timeout.connect(self._update_health)
+        self._timer.start(500)
+
+    def _kind_changed(self) -> None:
+        k = self.kind.currentIndex()
+        self.testbed.setVisible(k == 0)
+        self.address.setVisible(k == 1)
+        self.serial.setVisible(k == 2)
+        self.baud.setVisible(k == 2)
+        if k == 2 and not self.serial.count():
+            from serial.tools import list_ports   # lists ports; opens nothing
+            self.serial.addItems([p.device for p in list_ports.comports()])
+
+    def _toggle(self) -> None:
+        if self.session.client is not None or self.connect_button.text() == "Disconnect":
+            self.session.disconnect_link()
+            self.connect_button.setText("Connect")
+            return
+        k = self.kind.currentIndex()
+        if k == 0:
+            self.session.connect_sim(self.testbed.currentText() or None)
+        elif k == 1:
+            self.session.connect_address(self.address.text().strip())
+        else:
+            self.session.connect_address(f"serial://{self.serial.currentText()}?baud={self.baud.currentText()}")
+        self.connect_button.setText("Disconnect")
+
+    def _link_state(self, state: str, message: str) -> None:
+        self.lamp.setStyleSheet(lamp_style(LAMP.get(state, "#616161")))
+        self.lamp.setToolTip(f"{state}: {message}")
+        if state in ("lost", "failed"):
+            self.health.setText(f"LINK {state.upper()}: {message}")
+            self.health.setStyleSheet("color:#c62828; font-weight:bold;")
+        elif state == "closed":
+            self.health.setText("not connected")
+            self.health.setStyleSheet("")
+
+    def _update_health(self) -> None:
+        src = self.session.source
+        if src is None or getattr(src, "link_state", "") not in ("up",):
+            return
+        self.health.setStyleSheet("")
+        self.health.setText(format_snapshot(src.stats.snapshot()))
+
+
+class StatusPanel(QWidget):
+    """Mode, arm state, saturation, faults, temperatures, watchdog, parameter table CRC,
+    and the limit table (latched until acknowledged)."""
+
+    def __init__(self, session: Session, parent=None):
+        super().__init__(parent)
+        self.session = session
+        self.d = session.d
+        lay = QVBoxLayout(self)
+        grid = QGridLayout()
+        self.fields: dict[str, QLabel] = {}
+        names = ["mode", "armed", "coarse_saturated", "fine_saturated", "fault", "fault_code",
+                 "watchdog", "temp_motor_coarse", "temp_flexure", "param_table_crc"]
+        for i, name in enumerate(names):
+            grid.addWidget(QLabel(name.replace("_", " ")), i, 0)
+            lab = QLabel("-")
+            lab.setFont(QFont("monospace"))
+            grid.addWidget(lab, i, 1)
+            self.fields[name] = lab
+        lay.addLayout(grid)
+        self.crc_warning = QLabel("")
+        self.crc_warning.setWordWrap(True)
+        lay.addWidget(self.crc_warning)
+        self.limits = QTableWidget(0, 4)
+        self.limits.setHorizontalHeaderLabels(["channel", "value", "latched", "worst"])
+        self.limits.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        self.limits.verticalHeader().setVisible(False)
+        lay.addWidget(self.limits, 1)
+        self.ack = QPushButton("Acknowledge limits")
+        self.ack.clicked.connect(lambda: session.limits.acknowledge())
+        lay.addWidget(self.ack)
+        self._states = {v: k for k, v in self.d.packet("HIGH_RATE").item_by_name["mode"].states.items()}
+        hk = self.d.packet("HOUSEKEEPING").item_by_name
+        self._faults = {v: k for k, v in hk["fault_code"].states.items()}
+        self._watchdog = {v: k for k, v in hk["watchdog"].states.items()}
+        self._timer = QTimer(self)
+        self._timer.timeout.connect(self.refresh)
+        self._timer.start(100)
+
+    def refresh(self) -> None:
+        hr = self.session.store.ring("HIGH_RATE")
+        hk = self.session.store.ring("HOUSEKEEPING")
+        mode = hr.latest("mode")
+        if mode is not None:
+            self._set("mode", self._states.get(int(mode), str(mode)))
+            for flag in ("armed", "coarse_saturated", "fine_saturated", "fault"):
+                on = bool(hr.latest(flag))
+                alarm = on and flag != "armed"
+                self._set(flag, "YES" if on else "no", "#c62828" if alarm else ("#2e7d32" if on else ""))
+        code = hk.latest("fault_code")
+        if code is not None:
+            self._set("fault_code", self._faults.get(int(code), str(code)), "#c62828" if code else "")
+            wd = int(hk.latest("watchdog"))
+            self._set("watchdog", self._watchdog.get(wd, str(wd)), "#c62828" if wd == 2 else "")
+            self._set("temp_motor_coarse", f"{hk.latest('temp_motor_coarse'):.1f} degC")
+            self._set("temp_flexure", f"{hk.latest('temp_flexure'):.1f} degC")
+            crc = int(hk.latest("param_table_crc"))
+            self._set("param_table_crc", f"{crc:08x}")
+            want = self.session.last_uploaded_crc
+            if want is not None and want != crc:
+                self.crc_warning.setText(f"ACTIVE PARAMETER TABLE {crc:08x} IS NOT THE ONE LAST "
+                                         f"UPLOADED ({want:08x})")
+                self.crc_warning.setStyleSheet("background:#c62828; color:white; font-weight:bold; padding:4px;")
+            else:
+                self.crc_warning.setText("")
+                self.crc_warning.setStyleSheet("")
+        states = self.session.limits.snapshot()
+        self.limits.setRowCount(len(states))
+        for row, st in enumerate(states):
+            cells = [st.channel, f"{st.value:.4g} {st.units}", ("green", "yellow", "red")[st.latched],
+                     f"{st.worst_value:.4g}" if st.latched else ""]
+            for col, text in enumerate(cells):
+                item = self.limits.item(row, col)
+                if item is None:
+                    item = QTableWidgetItem()
+                    self.limits.setItem(row, col, item)
+                item.setText(text)
+                if col == 2:
+                    item.setBackground(STATE_COLOURS[st.latched])
+
+    def _set(self, name: str, text: str, colour: str = "") -> None:
+        lab = self.fields[name]
+        lab.setText(text)
+        lab.setStyleSheet(f"color:{colour}; font-weight:bold;" if colour else "")
+
+
+class CommandPanel(QWidget):
+    """Mode, arm/disarm, friction compensation, the big Abort, and command stages."""
+
+    sig_abort = Signal()
+
+    def __init__(self, session: Session, parent=None):
+        super().__init__(parent)
+        self.session = session
+        lay = QVBoxLayout(self)
+        self.abort_button = QPushButton("ABORT  (Esc)")
+        self.abort_button.setMinimumHeight(64)
+        self.abort_button.setStyleSheet("QPushButton{background:#c62828; color:white; font-size:20px; "
+                                        "font-weight:bold; border-radius:6px;} QPushButton:pressed{background:#8e0000;}")
+        self.abort_button.clicked.connect(self.sig_abort.emit)
+        lay.addWidget(self.abort_button)
+        form = QFormLayout()
+        self.mode = QComboBox()
+        self.mode.addItems(list(session.d.command("SET_MODE").args[0].states))
+        set_mode = QPushButton("Set mode")
+        set_mode.clicked.connect(lambda: self.send("SET_MODE", mode=self.mode.currentText()))
+        row = QHBoxLayout()
+        row.addWidget(self.mode, 1)
+        row.addWidget(set_mode)
+        form.addRow("Mode", row)
+        arm, disarm = QPushButton("Arm"), QPushButton("Disarm")
+        arm.clicked.connect(lambda: self.send("ARM"))
+        disarm.clicked.connect(lambda: self.send("DISARM"))
+        row2 = QHBoxLayout()
+        row2.addWidget(arm)
+        row2.addWidget(disarm)
+        form.addRow("Drives", row2)
+        self.friction = QCheckBox("friction compensation")
+        self.friction.toggled.connect(lambda on: self.send("FRICTION_COMP", enable=int(on)))
+        form.addRow("", self.friction)
+        lay.addLayout(form)
+        lay.addWidget(QLabel("Commands (newest first)"))
+        self.stages = QListWidget()
+        lay.addWidget(self.stages, 1)
+        session.sig_command.connect(self._stage)
+        #: tests answer the confirmation dialog through this (None: ask the operator)
+        self.confirm_override: bool | None = None
+
+    def send(self, name: str, **args) -> None:
+        cmd = self.session.d.command(name)
+        if cmd.critical and not self._confirm(name, args):
+            self._stage(name, 0, "CANCELLED", "not confirmed")
+            return
+        self.session.command(name, **args)
+
+    def _confirm(self, name: str, args: dict) -> bool:
+        if self.confirm_override is not None:
+            return self.confirm_override
+        text = f"Send {name}{' ' + str(args) if args else ''} to the device?"
+        return QMessageBox.question(self, "Critical command", text) == QMessageBox.StandardButton.Yes
+
+    def _stage(self, name: str, seq: int, stage: str, reason: str) -> None:
+        colour = {"COMPLETED": "#2e7d32", "ACCEPTED": "#1565c0", "REJECTED": "#c62828",
+                  "FAILED": "#c62828", "TIMEOUT": "#c62828", "CANCELLED": "#616161"}.get(stage, "")
+        text = f"{datetime.now():%H:%M:%S}  {name}: {stage}" + (f" ({reason})" if reason not in ("", "OK") else "")
+        item = QListWidgetItem(text)
+        if colour:
+            item.setForeground(QColor(colour))
+        self.stages.insertItem(0, item)
+        while self.stages.count() > 200:
+            self.stages.takeItem(self.stages.count() - 1)
+
+
+class RecordingPanel(QWidget):
+    def __init__(self, session: Session, default_folder: str = "logs", parent=None):
+        super().__init__(parent)
+        self.session = session
+        form = QFormLayout(self)
+        self.folder = QLineEdit(default_folder)
+        self.name = QLineEdit("test")
+        self.notes = QLineEdit()
+        self.button = QPushButton("Start recording")
+        self.info = QLabel("not recording")
+        self.info.setWordWrap(True)
+        for label, w in (("Folder", self.folder), ("Test name", self.name), ("Notes", self.notes)):
+            form.addRow(label, w)
+        form.addRow(self.button)
+        form.addRow(self.info)
+        self.button.clicked.connect(self.toggle)
+        session.sig_recording.connect(self._recording)
+        self._started = 0.0
+        self._timer = QTimer(self)
+        self._timer.timeout.connect(self._update)
+        self._timer.start(500)
+
+    def toggle(self) -> None:
+        if self.session.recorder is not None and self.session.recorder.state == "recording":
+            self.session.stop_recording()
+        else:
+            self.session.start_recording(self.folder.text(), self.name.text(), self.notes.text())
+
+    def _recording(self, state: str, text: str) -> None:
+        if state == "recording":
+            self._started = time.monotonic()
+            self.button.setText("Stop recording")
+            self.info.setStyleSheet("color:#c62828; font-weight:bold;")
+            self.info.setText(f"recording to {text}")
+        else:
+            self.button.setText("Start recording")
+            self.info.setStyleSheet("color:#c62828; font-weight:bold;" if state == "failed" else "")
+            self.info.setText(f"{state}: {text}")
+
+    def _update(self) -> None:
+        rec = self.session.recorder
+        if rec is None or rec.state != "recording":
+            return
+        st = rec.status()
+        self.info.setText(f"REC {time.monotonic() - self._started:6.0f} s  {st.frames} frames  "
+                          f"{st.bytes / 1e6:.1f} MB\n{st.path}")
+
+
+class EventLog(QWidget):
+    """Device EVENTs, link events and command results, with a level filter and search."""
+
+    LEVELS = ["DEBUG", "INFO", "WARNING", "ERROR", "CRITICAL"]
+
+    def __init__(self, session: Session, parent=None):
+        super().__init__(parent)
+        lay = QVBoxLayout(self)
+        row = QHBoxLayout()
+        self.level = QComboBox()
+        self.level.addItems(self.LEVELS)
+        self.level.setCurrentText("INFO")
+        self.search = QLineEdit()
+        self.search.setPlaceholderText("search events")
+        row.addWidget(QLabel("level ≥"))
+        row.addWidget(self.level)
+        row.addWidget(self.search, 1)
+        lay.addLayout(row)
+        self.table = QTableWidget(0, 4)
+        self.table.setHorizontalHeaderLabels(["time", "level", "source", "message"])
+        self.table.horizontalHeader().setStretchLastSection(True)
+        self.table.verticalHeader().setVisible(False)
+        lay.addWidget(self.table, 1)
+        session.sig_event.connect(self.add)
+        self.level.currentIndexChanged.connect(self._filter)
+        self.search.textChanged.connect(self._filter)
+
+    def add(self, level: str, source: str, text: str) -> None:
+        row = self.table.rowCount()
+        self.table.insertRow(row)
+        colour = {"WARNING": "#f9a825", "ERROR": "#c62828", "CRITICAL": "#c62828"}.get(level)
+        for col, value in enumerate((f"{datetime.now():%H:%M:%S.%f}"[:-3], level, source, text)):
+            item = QTableWidgetItem(value)
+            if colour:
+                item.setForeground(QColor(colour))
+            self.table.setItem(row, col, item)
+        self._apply(row)
+        self.table.scrollToBottom()
+
+    def _apply(self, row: int) -> None:
+        lvl = self.table.item(row, 1).text()
+        rank = self.LEVELS.index(lvl) if lvl in self.LEVELS else 1
+        needle = self.search.text().lower()
+        text = " ".join(self.table.item(row, c).text() for c in range(4)).lower()
+        self.table.setRowHidden(row, rank < self.level.currentIndex() or (needle and needle not in text))
+
+    def _filter(self) -> None:
+        for row in range(self.table.rowCount()):
+            self._apply(row)
+
+
+class ReplayBar(QWidget):
+    """Timeline over the whole log, play/pause, speed; seek by dragging."""
+
+    def __init__(self, session: Session, parent=None):
+        super().__init__(parent)
+        self.session = session
+        lay = QHBoxLayout(self)
+        lay.setContentsMargins(4, 2, 4, 2)
+        self.play = QPushButton("Pause")
+        self.speed = QComboBox()
+        self.speed.addItems(["0.1", "0.5", "1", "2", "5", "10", "50", "max"])
+        self.speed.setCurrentText("1")
+        self.slider = QSlider(Qt.Orientation.Horizontal)
+        self.slider.setRange(0, 1000)
+        self.position = QLabel("")
+        lay.addWidget(QLabel("Replay"))
+        lay.addWidget(self.play)
+        lay.addWidget(QLabel("speed"))
+        lay.addWidget(self.speed)
+        lay.addWidget(self.slider, 1)
+        lay.addWidget(self.position)
+        self.play.clicked.connect(self._toggle)
+        self.speed.currentTextChanged.connect(self._speed)
+        self.slider.sliderReleased.connect(self._seek)
+        self._timer = QTimer(self)
+        self._timer.timeout.connect(self._update)
+        self._timer.start(100)
+
+    def _toggle(self) -> None:
+        src = self.session.replay
+        if src is None:
+            return
+        if src.playing:
+            src.pause()
+        else:
+            src.play()
+
+    def _speed(self, text: str) -> None:
+        if self.session.replay is not None:
+            self.session.replay.speed = None if text == "max" else float(text)
+
+    def _seek(self) -> None:
+        if self.session.replay is not None:
+            self.session.replay.seek_fraction(self.slider.value() / 1000)
+
+    def _update(self) -> None:
+        src = self.session.replay
+        if src is None:
+            return
+        self.play.setText("Pause" if src.playing else "Play")
+        if not self.slider.isSliderDown() and src.duration:
+            pos = (src.position or src.start_time) - src.start_time
+            self.slider.setValue(int(1000 * pos / src.duration))
+            self.position.setText(f"{pos:8.2f} / {src.duration:.2f} s")

@@ -1,0 +1,262 @@
+"""The GUI's session controller: owns the link (or the replay), the simulator child
+process and the recorder, and turns their thread callbacks into Qt signals.
+
+Widgets never touch a socket or a file: they call this object's methods, which run
+anything that can block (connecting, commands, opening a log) on worker threads, and
+they read the TelemetryStore / LimitMonitor on their own timers.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+from PySide6.QtCore import QObject, QTimer, Signal
+
+from ..dictionary import Dictionary
+from ..errors import GroundStationError
+from ..link import DeviceClient, open_client
+from ..logs import Recorder, ReplaySource
+from ..logs.live import attach_recorder
+from ..monitor import LimitMonitor
+from ..sim.process import SimulatorProcess
+from ..stream import TelemetryStore
+
+log = logging.getLogger(__name__)
+
+RECONNECT_DELAYS_S = (1.0, 2.0, 4.0, 8.0, 10.0)
+
+
+class Session(QObject):
+    sig_link_state = Signal(str, str)            # state, message
+    sig_event = Signal(str, str, str)            # level, source, text
+    sig_command = Signal(str, int, str, str)     # command, sequence, stage, reason
+    sig_recording = Signal(str, str)             # state ("recording", "stopped", "failed"), text
+    sig_source = Signal(str, str)                # "live"/"replay"/"none", description
+
+    def __init__(self, dictionary: Dictionary, store_seconds: float = 600.0, parent=None):
+        super().__init__(parent)
+        self.d = dictionary
+        self.store = TelemetryStore(dictionary, store_seconds)
+        self.limits = LimitMonitor(dictionary)
+        self.client: DeviceClient | None = None
+        self.replay: ReplaySource | None = None
+        self.sim: SimulatorProcess | None = None
+        self.recorder: Recorder | None = None
+        self.address: str = ""
+        self.testbed: str | None = None
+        self.last_uploaded_crc: int | None = None
+        self._want_connected = False
+        self._attempt = 0
+        self._reconnect = QTimer(self)
+        self._reconnect.setSingleShot(True)
+        self._reconnect.timeout.connect(self._try_reconnect)
+        self.sig_link_state.connect(self._on_link_state)
+
+    # ------------------------------------------------------------------ sources
+    @property
+    def source(self):
+        """What telemetry comes from: the live client or the replay (same interface)."""
+        return self.replay if self.replay is not None else self.client
+
+    def connect_sim(self, testbed: str | None = None) -> None:
+        self.testbed = testbed
+        self._start_link("sim")
+
+    def connect_address(self, address: str) -> None:
+        self._start_link(address)
+
+    def _start_link(self, address: str) -> None:
+        self.close_replay()
+        self.disconnect_link()
+        self.address = address
+        self._want_connected = True
+        self._attempt = 0
+        self.sig_link_state.emit("connecting", address)
+        threading.Thread(target=self._connect_worker, name="gs-connect", daemon=True).start()
+
+    def _connect_worker(self) -> None:
+        try:
+            address = self.address
+            if address == "sim":
+                if self.sim is None or self.sim.proc is None:
+                    self.sim = SimulatorProcess(pacing="realtime", testbed=self.testbed)
+                    self.sim.start()
+                address = self.sim.address
+            client = open_client(self.d, address)
+            client.subscribe(self.store)
+            client.subscribe(self.limits)
+            client.subscribe(self._on_block)
+            client.add_link_listener(lambda s, m: self.sig_link_state.emit(s, m))
+            client.add_command_listener(self._on_command_done)
+            client.connect(take_over=True)
+            self.client = client
+            self._attempt = 0
+            self.sig_source.emit("live", address)
+            self.sig_link_state.emit("up", address)
+            self.sig_event.emit("INFO", "link", f"connected to {address}")
+        except GroundStationError as exc:
+            self.sig_link_state.emit("failed", str(exc))
+
+    def disconnect_link(self) -> None:
+        """Close the session (the device disarms) and stop the simulator child."""
+        self._want_connected = False
+        self._reconnect.stop()
+        client, self.client = self.client, None
+        if client is not None:
+            threading.Thread(target=client.close, name="gs-disconnect", daemon=True).start()
+            self.sig_link_state.emit("closed", "")
+        if self.sim is not None and self.address != "sim":
+            self.sim.stop()
+            self.sim = None
+
+    def shutdown(self) -> None:
+        """Everything off: recording closed, link closed, simulator stopped."""
+        self.stop_recording()
+        self._want_connected = False
+        self._reconnect.stop()
+        if self.client is not None:
+            self.client.close()
+            self.client = None
+        if self.sim is not None:
+            self.sim.stop()
+            self.sim = None
+        self.close_replay()
+
+    def _on_link_state(self, state: str, message: str) -> None:
+        if state == "lost":
+            self.sig_event.emit("ERROR", "link", f"link lost: {message}")
+        if state in ("lost", "failed") and self._want_connected and self.replay is None:
+            delay = RECONNECT_DELAYS_S[min(self._attempt, len(RECONNECT_DELAYS_S) - 1)]
+            self._attempt += 1
+            self.sig_event.emit("WARNING", "link", f"reconnecting in {delay:g} s (attempt {self._attempt})")
+            self._reconnect.start(int(delay * 1000))
+
+    def _try_reconnect(self) -> None:
+        if not self._want_connected:
+            return
+        old, self.client = self.client, None
+        if old is not None:
+            threading.Thread(target=old.close, daemon=True).start()
+        if self.address == "sim" and self.sim is not None and (
+                self.sim.proc is None or self.sim.proc.poll() is not None):
+            self.sim.stop()
+            self.sim = None                       # start a fresh simulator
+        self.sig_link_state.emit("connecting", self.address)
+        threading.Thread(target=self._connect_worker, name="gs-reconnect", daemon=True).start()
+
+    # ------------------------------------------------------------------ telemetry callbacks
+    def _on_block(self, block) -> None:
+        """Receiver thread: only EVENT packets go further (as signals, queued to the GUI)."""
+        if block.name != "EVENT":
+            return
+        levels = {v: k for k, v in block.packet.item_by_name["level"].states.items()}
+        for lvl, code, text in zip(block["level"], block["code"], block["text"]):
+            self.sig_event.emit(levels.get(int(lvl), str(lvl)), "device",
+                                f"{self.d.event_name(int(code))}: {text}")
+
+    def _on_command_done(self, result) -> None:
+        last = result.stages[-1] if result.stages else None
+        if result.name == "HEARTBEAT" and last is not None and last.stage == "COMPLETED":
+            return
+        if last is not None:
+            self.sig_command.emit(result.name, result.sequence, last.stage, last.reason)
+
+    # ------------------------------------------------------------------ commands
+    def command(self, name: str, **args: Any) -> None:
+        """Send a command on a worker thread; stages arrive as sig_command."""
+        client = self.client
+        if client is None:
+            self.sig_command.emit(name, 0, "REFUSED", "not connected")
+            return
+
+        def stage(rec):
+            self.sig_command.emit(name, 0, rec.stage, rec.reason)
+
+        def work():
+            try:
+                client.command(name, on_stage=stage, **args)
+            except GroundStationError as exc:
+                self.sig_event.emit("ERROR", "command", str(exc))
+        threading.Thread(target=work, name=f"gs-cmd-{name}", daemon=True).start()
+
+    def abort(self) -> None:
+        """ABORT now, whatever the state; reported as an event if it cannot be sent."""
+        client = self.client
+        if client is None:
+            self.sig_event.emit("WARNING", "command", "ABORT: no device connected")
+            return
+        self.command("ABORT")
+
+    # ------------------------------------------------------------------ recording
+    def start_recording(self, folder: str, test_name: str, notes: str = "") -> Path | None:
+        if self.recorder is not None and self.recorder.state == "recording":
+            return self.recorder.path
+        testbed_text = Path(self.testbed).read_text() if self.testbed else ""
+        rec = Recorder(self.d, folder, test_name=test_name or "test", notes=notes,
+                       testbed_text=testbed_text, testbed_path=self.testbed or "",
+                       on_failure=lambda msg: self.sig_recording.emit("failed", msg))
+        try:
+            path = rec.start()
+        except GroundStationError as exc:
+            self.sig_recording.emit("failed", str(exc))
+            return None
+        self.recorder = rec
+        if self.client is not None:
+            attach_recorder(self.client, rec)
+        if notes:
+            rec.note(notes)
+        self.sig_recording.emit("recording", str(path))
+        return path
+
+    def stop_recording(self) -> None:
+        rec = self.recorder
+        if rec is None:
+            return
+        self.recorder = None
+        status = rec.stop()
+        if status.state == "stopped":
+            self.sig_recording.emit("stopped", f"{status.frames} frames in "
+                                    + ", ".join(p.name for p in status.files))
+        else:
+            self.sig_recording.emit(status.state, status.error)
+
+    # ------------------------------------------------------------------ replay
+    def open_log(self, path: str) -> None:
+        """Switch the charts to a recorded log (the link, if any, is closed)."""
+        self.stop_recording()
+        self.disconnect_link()
+        self.close_replay()
+        try:
+            src = ReplaySource(path, dictionary=None, speed=1.0)
+        except GroundStationError as exc:
+            self.sig_event.emit("ERROR", "replay", str(exc))
+            return
+        self.store.clear()
+        self.limits.acknowledge()
+        src.subscribe(self.store)
+        src.subscribe(self.limits)
+        src.subscribe(self._on_block)
+        src.add_link_listener(lambda s, m: self.sig_event.emit("INFO", "replay", f"replay {s} {m}".strip()))
+        self.replay = src
+        self.sig_source.emit("replay", str(path))
+        src.play()
+
+    def close_replay(self) -> None:
+        src, self.replay = self.replay, None
+        if src is not None:
+            src.close()
+            self.sig_source.emit("none", "")
+
+    # ------------------------------------------------------------------ helpers
+    def wait_connected(self, timeout: float = 30.0) -> bool:
+        """For scripts and tests: block until the live link is up (or timeout)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if self.client is not None and self.client.link_state == "up":
+                return True
+            time.sleep(0.02)
+        return False
