@@ -235,7 +235,7 @@ class CommandPanel(QWidget):
     def send(self, name: str, **args) -> None:
         cmd = self.session.d.command(name)
         if cmd.critical and not self._confirm(name, args):
-            self._stage(name, 0, "CANCELLED", "not confirmed")
+            self._stage(name, "", "CANCELLED", "not confirmed")
             return
         self.session.command(name, **args)
 
@@ -245,7 +245,7 @@ class CommandPanel(QWidget):
         text = f"Send {name}{' ' + str(args) if args else ''} to the device?"
         return QMessageBox.question(self, "Critical command", text) == QMessageBox.StandardButton.Yes
 
-    def _stage(self, name: str, seq: int, stage: str, reason: str) -> None:
+    def _stage(self, name: str, seq: str, stage: str, reason: str) -> None:
         colour = {"COMPLETED": "#2e7d32", "ACCEPTED": "#1565c0", "REJECTED": "#c62828",
                   "FAILED": "#c62828", "TIMEOUT": "#c62828", "CANCELLED": "#616161"}.get(stage, "")
         text = f"{datetime.now():%H:%M:%S}  {name}: {stage}" + (f" ({reason})" if reason not in ("", "OK") else "")
@@ -349,7 +349,7 @@ class EventLog(QWidget):
         rank = self.LEVELS.index(lvl) if lvl in self.LEVELS else 1
         needle = self.search.text().lower()
         text = " ".join(self.table.item(row, c).text() for c in range(4)).lower()
-        self.table.setRowHidden(row, rank < self.level.currentIndex() or (needle and needle not in text))
+        self.table.setRowHidden(row, bool(rank < self.level.currentIndex() or (needle and needle not in text)))
 
     def _filter(self) -> None:
         for row in range(self.table.rowCount()):

@@ -33,7 +33,7 @@ RECONNECT_DELAYS_S = (1.0, 2.0, 4.0, 8.0, 10.0)
 class Session(QObject):
     sig_link_state = Signal(str, str)            # state, message
     sig_event = Signal(str, str, str)            # level, source, text
-    sig_command = Signal(str, int, str, str)     # command, sequence, stage, reason
+    sig_command = Signal(str, str, str, str)     # command, sequence (u32, as text), stage, reason
     sig_recording = Signal(str, str)             # state ("recording", "stopped", "failed"), text
     sig_source = Signal(str, str)                # "live"/"replay"/"none", description
 
@@ -114,7 +114,9 @@ class Session(QObject):
             self.sim = None
 
     def shutdown(self) -> None:
-        """Everything off: recording closed, link closed, simulator stopped."""
+        """Everything off: recording closed, link closed, simulator stopped.  Signals are
+        blocked first: the widgets they would reach are being torn down."""
+        self.blockSignals(True)
         self.stop_recording()
         self._want_connected = False
         self._reconnect.stop()
@@ -163,18 +165,18 @@ class Session(QObject):
         if result.name == "HEARTBEAT" and last is not None and last.stage == "COMPLETED":
             return
         if last is not None:
-            self.sig_command.emit(result.name, result.sequence, last.stage, last.reason)
+            self.sig_command.emit(result.name, str(result.sequence), last.stage, last.reason)
 
     # ------------------------------------------------------------------ commands
     def command(self, name: str, **args: Any) -> None:
         """Send a command on a worker thread; stages arrive as sig_command."""
         client = self.client
         if client is None:
-            self.sig_command.emit(name, 0, "REFUSED", "not connected")
+            self.sig_command.emit(name, "", "REFUSED", "not connected")
             return
 
         def stage(rec):
-            self.sig_command.emit(name, 0, rec.stage, rec.reason)
+            self.sig_command.emit(name, "", rec.stage, rec.reason)
 
         def work():
             try:
