@@ -87,6 +87,7 @@ class ConnectionBar(QWidget):
         self.connect_button.setText("Disconnect")
 
     def _link_state(self, state: str, message: str) -> None:
+        self.connect_button.setText("Connect" if state == "closed" else "Disconnect")
         self.lamp.setStyleSheet(lamp_style(LAMP.get(state, "#616161")))
         self.lamp.setToolTip(f"{state}: {message}")
         if state in ("lost", "failed"):
