@@ -102,3 +102,18 @@ def test_link_loss_is_shown_and_the_link_comes_back(qtbot, window):
                     and window.session.client.link_state == "up", timeout=60000)
     resumed = hr_frames(window)
     qtbot.waitUntil(lambda: hr_frames(window) > resumed + 600, timeout=30000)
+
+
+def test_layout_and_chart_channels_survive_a_restart(qtbot, dictionary, tmp_path):
+    settings = QSettings(str(tmp_path / "s.ini"), QSettings.Format.IniFormat)
+    first = MainWindow(Session(dictionary, store_seconds=10.0), settings)
+    qtbot.addWidget(first)
+    first.charts.set_layout([["HIGH_RATE.gyro_rate"], ["HOUSEKEEPING.temp_flexure"]])
+    first.charts.set_window_seconds(60)
+    first.docks["Spectrum"].setVisible(False)
+    first.close()
+    again = MainWindow(Session(dictionary, store_seconds=10.0), settings)
+    qtbot.addWidget(again)
+    assert again.charts.layout_ids() == [["HIGH_RATE.gyro_rate"], ["HOUSEKEEPING.temp_flexure"]]
+    assert again.charts.window_seconds == 60
+    again.close()

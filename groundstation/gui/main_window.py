@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 from PySide6.QtCore import QByteArray, QSettings, Qt
@@ -152,16 +153,19 @@ class MainWindow(QMainWindow):
         if isinstance(state, QByteArray):
             self.restoreState(state)
         charts = self.settings.value("charts")
-        if isinstance(charts, dict):
+        if isinstance(charts, str):
             try:
-                self.charts.restore_state(charts)
-            except (KeyError, TypeError, ValueError):
-                self.charts.set_layout(DEFAULT_LAYOUT)   # settings of an older version
+                state = json.loads(charts)
+            except ValueError:
+                state = None                              # damaged settings: defaults
+            if isinstance(state, dict):
+                self.charts.restore_state(state)
 
     def save(self) -> None:
         self.settings.setValue("geometry", self.saveGeometry())
         self.settings.setValue("window_state", self.saveState())
-        self.settings.setValue("charts", self.charts.state())
+        # as JSON text: QSettings would hand numbers and booleans back as strings
+        self.settings.setValue("charts", json.dumps(self.charts.state()))
 
     def reset_layout(self) -> None:
         self.charts.set_layout(DEFAULT_LAYOUT)
