@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import os
 import signal
 import sys
 import threading
@@ -50,7 +49,8 @@ def _cmd_sim(args) -> int:
     testbed = load_testbed(args.testbed)        # refuses a bad file before anything starts
     dev = SimulatedDevice(load_dictionary(args.protocol_dir), host=args.host,
                           tcp_port=args.tcp_port, pacing=args.pacing, seed=args.seed,
-                          frames_per_datagram=args.frames_per_datagram, testbed=testbed)
+                          frames_per_datagram=args.frames_per_datagram, testbed=testbed,
+                          speed=args.speed)
     dev.start()
     if not args.announce:
         print(f"testbed: {testbed.name} ({testbed.path}), friction model "
@@ -137,6 +137,16 @@ def _cmd_gui(args) -> int:
                    replay=args.replay)
 
 
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
+    return value
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="groundstation",
                                 description="Ground station for hybrid-flexure-bearing testbeds")
@@ -157,6 +167,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="testbed file (default: profiles/testbeds/relative_2dof.toml)")
     s.add_argument("--pacing", choices=["realtime", "fast"], default="realtime")
     s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--speed", type=_positive_float, default=1.0,
+                   help="realtime pacing: control periods per 1/1200 s of wall time "
+                        "(10: a 10x burst of 12 000 frames/s; default 1)")
     s.add_argument("--frames-per-datagram", type=int, default=1)
     s.add_argument("--pty", action="store_true",
                    help="also serve a serial link on a pseudo-terminal (prints its name)")

@@ -4,7 +4,6 @@ speed limits and clear errors.  One 3 s log with sequence gaps serves every test
 from __future__ import annotations
 
 import math
-import shutil
 import threading
 import time
 

@@ -49,14 +49,20 @@ class SimulatedDevice:
     def __init__(self, dictionary: Dictionary | None = None, *, host: str = "127.0.0.1",
                  tcp_port: int = 0, pacing: str = "realtime", seed: int = 0,
                  frames_per_datagram: int = 1, firmware: Firmware | None = None,
-                 testbed: Testbed | None = None):
+                 testbed: Testbed | None = None, speed: float = 1.0):
         if pacing not in ("realtime", "fast", "manual"):
             raise ValueError(f"pacing must be realtime, fast or manual, not {pacing!r}")
+        if not speed > 0 or speed == float("inf"):
+            raise ValueError(f"speed must be a finite number > 0, not {speed!r}")
         self.dictionary = dictionary or load_dictionary()
         self.codec = FrameCodec(self.dictionary)
         self.firmware = firmware or Firmware(self.dictionary, seed=seed, testbed=testbed)
         self.host = host
         self.pacing = pacing
+        #: realtime pacing only: control periods per 1/1200 s of wall time (10: a 10x
+        #: burst, 12 000 frames/s).  Ticks stay exact; only the wall clock is scaled, so
+        #: tick-based timeouts (the watchdog) also run `speed` times sooner in wall time.
+        self.speed = float(speed)
         self.frames_per_datagram = max(1, frames_per_datagram)
         self._requested_port = tcp_port
         self._lock = threading.RLock()
@@ -297,7 +303,7 @@ class SimulatedDevice:
 
     def _catch_up(self) -> None:
         """Realtime pacing: run the control periods that are due by the wall clock."""
-        rate = self.dictionary.control_rate_hz
+        rate = self.dictionary.control_rate_hz * self.speed     # periods per wall second
         with self._lock:
             due = int((time.monotonic() - self._t0) * rate) - self._ticks_done
             max_batch = int(rate // 2)
@@ -318,5 +324,5 @@ class SimulatedDevice:
                 continue
             self._catch_up()
             # sleep to the next control period's start, so frames leave on time
-            next_due = self._t0 + (self._ticks_done + 1) / self.dictionary.control_rate_hz
+            next_due = self._t0 + (self._ticks_done + 1) / (self.dictionary.control_rate_hz * self.speed)
             time.sleep(max(0.0002, next_due - time.monotonic()))

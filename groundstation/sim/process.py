@@ -21,10 +21,13 @@ ANNOUNCE = "LISTENING "
 
 class SimulatorProcess:
     def __init__(self, *, host: str = "127.0.0.1", tcp_port: int = 0, pacing: str = "realtime",
-                 seed: int = 0, testbed: str | None = None, start_timeout: float = 60.0):
+                 seed: int = 0, testbed: str | None = None, start_timeout: float = 60.0,
+                 speed: float = 1.0):
         self.args = [sys.executable, "-m", "groundstation", "sim", "--host", host,
                      "--tcp-port", str(tcp_port), "--pacing", pacing, "--seed", str(seed),
                      "--announce"] + (["--testbed", str(testbed)] if testbed else [])
+        if speed != 1.0:                    # realtime pacing at `speed` x 1200 periods/s
+            self.args += ["--speed", repr(float(speed))]
         self.start_timeout = start_timeout
         self.proc: subprocess.Popen | None = None
         self.address: str = ""

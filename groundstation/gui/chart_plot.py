@@ -1,0 +1,241 @@
+"""One plot of the strip-chart stack: curves, gap markers, cursor line, info text, and
+the time axis that switches between device seconds and wall-clock labels."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, Signal
+from PySide6.QtWidgets import QMenu, QWidget
+
+from .channel_tree import DisplayUnit, channel_ids_from_text
+
+
+class _TimeAxis(pg.DateAxisItem):
+    """Bottom axis: plain seconds in device time, wall-clock labels in host time."""
+
+    def __init__(self) -> None:
+        super().__init__(orientation="bottom")
+        self.host = False
+        self.shown = True          # only the bottom plot of the stack labels its time axis
+
+    def tickValues(self, minVal, maxVal, size):
+        if self.host:
+            return super().tickValues(minVal, maxVal, size)
+        return pg.AxisItem.tickValues(self, minVal, maxVal, size)
+
+    def tickStrings(self, values, scale, spacing):
+        if self.host:
+            return super().tickStrings(values, scale, spacing)
+        return pg.AxisItem.tickStrings(self, values, scale, spacing)
+
+    def set_host(self, host: bool) -> None:
+        self.host = host
+        if host:
+            self.setLabel("host time (local)")
+        else:
+            self.setLabel("device time", units="s")
+        self.set_shown(self.shown)
+
+    def set_shown(self, shown: bool) -> None:
+        self.shown = shown
+        self.setStyle(showValues=shown)
+        self.showLabel(shown)
+
+
+class ChartPlot(pg.PlotWidget):
+    """One plot of the stack: its curves, gap markers, cursor line and info text.
+
+    Holds no data; the panel hands it arrays.  A drop of channel ids (text lines)
+    emits sig_dropped."""
+
+    #: curve colours, distinct on the dark background; red is kept for gap markers
+    PALETTE = ("#4e9bff", "#ffa62b", "#2ec4b6", "#c792ea", "#f7e03c", "#8ac926",
+               "#ff70a6", "#00d0ff", "#c0c0c0", "#ff8c61")
+    MAX_GAP_MARKERS = 100
+
+    sig_dropped = Signal(list)
+    sig_menu_about_to_show = Signal(object)
+    sig_mouse_x = Signal(object)                 # float, or None when the mouse leaves
+    sig_x_range_changed = Signal()
+
+    def __init__(self, parent: QWidget | None = None):
+        self.time_axis = _TimeAxis()
+        super().__init__(parent, axisItems={"bottom": self.time_axis})
+        self.setAcceptDrops(True)
+        self.setMinimumHeight(90)
+        pi = self.getPlotItem()
+        pi.setClipToView(True)
+        # No grid by default: on the raster engine a translucent grid doubles the paint
+        # time of a scrolling plot (measured); Plot Options → Grid in the menu adds one.
+        pi.hideButtons()
+        pi.getAxis("left").setWidth(80)
+        self.legend = pi.addLegend(offset=(4, 4), labelTextSize="8pt", brush=(0, 0, 0, 150))
+        vb = pi.getViewBox()
+        vb.setAutoVisible(y=True)
+        vb.disableAutoRange(axis="x")
+        self.curves: dict[str, pg.PlotDataItem] = {}
+        self.units: dict[str, DisplayUnit] = {}
+        self._names: dict[str, str] = {}
+        self.info = pg.TextItem(anchor=(1, 0), color=(235, 235, 235), fill=(0, 0, 0, 140))
+        self.info.setParentItem(vb)
+        self.info.hide()
+        vb.sigResized.connect(self._place_info)
+        self._gap_text = self._dec_text = ""
+        self._info_html: str | None = None
+        self.cursor = pg.InfiniteLine(angle=90, movable=False,
+                                      pen=pg.mkPen((255, 255, 255, 150), style=Qt.PenStyle.DotLine))
+        pi.addItem(self.cursor, ignoreBounds=True)
+        self.cursor.hide()
+        self._gap_pen = pg.mkPen((255, 50, 50, 200), width=1, style=Qt.PenStyle.DashLine)
+        self.gap_lines: list[pg.InfiniteLine] = []
+        self.chart_menu = QMenu("Chart", self)
+        self.channel_menus: dict[str, QMenu] = {}      # filled by the panel with the menu
+        vb.menu.addSeparator()
+        vb.menu.addMenu(self.chart_menu)
+        vb.menu.aboutToShow.connect(lambda: self.sig_menu_about_to_show.emit(self))
+        self.scene().sigMouseMoved.connect(self._on_mouse_moved)
+        vb.sigXRangeChanged.connect(lambda *_: self.sig_x_range_changed.emit())
+
+    # ------------------------------------------------------------ curves, axes
+    def add_curve(self, cid: str, name: str, unit: DisplayUnit, colour: int,
+                  description: str = "") -> pg.PlotDataItem:
+        curve = pg.PlotDataItem(pen=pg.mkPen(self.PALETTE[colour], width=1))
+        curve.setClipToView(True)
+        curve.setToolTip(f"{cid}: {description}" if description else cid)
+        self.curves[cid] = curve
+        self.units[cid] = unit
+        self._names[cid] = name
+        self.getPlotItem().addItem(curve)
+        self._relabel()
+        return curve
+
+    def remove_curve(self, cid: str) -> None:
+        self.getPlotItem().removeItem(self.curves.pop(cid))
+        del self.units[cid], self._names[cid]
+        self._relabel()
+
+    def _relabel(self) -> None:
+        """Axis label with units (SI prefix where the unit takes one), legend entries."""
+        axis = self.getPlotItem().getAxis("left")
+        kinds = {u.units for u in self.units.values()}
+        names = list(self._names.values())
+        if len(kinds) == 1:             # the units only: the legend names the channels
+            unit = next(iter(self.units.values()))
+            ranges = unit.si_ranges if unit.si_prefix else ()
+            text = names[0] if len(names) == 1 and not unit.units else ""
+            axis.setLabel(text, units=unit.units or None, siPrefixEnableRanges=ranges)
+        else:
+            axis.setLabel("mixed units" if names else "", siPrefixEnableRanges=())
+        self.legend.clear()
+        for cid, curve in self.curves.items():
+            label = self._names[cid]
+            if len(kinds) > 1 and self.units[cid].units:
+                label += f" [{self.units[cid].units}]"
+            self.legend.addItem(curve, label)
+        self.legend.setVisible(bool(self.curves))
+
+    def set_timebase(self, timebase: str) -> None:
+        self.time_axis.set_host(timebase == "host")
+
+    def set_mouse_x(self, enabled: bool) -> None:
+        """Pan/zoom in time only while paused; live, the window follows the data."""
+        self.getPlotItem().getViewBox().setMouseEnabled(x=enabled, y=True)
+
+    @property
+    def autoscale(self) -> bool:
+        return bool(self.getPlotItem().getViewBox().state["autoRange"][1])
+
+    def set_autoscale(self, enabled: bool) -> None:
+        self.getPlotItem().getViewBox().enableAutoRange(axis="y", enable=bool(enabled))
+
+    def set_y_range(self, low: float, high: float) -> None:
+        if not (math.isfinite(low) and math.isfinite(high) and low < high):
+            raise ValueError(f"y range needs finite low < high, got {low!r}, {high!r}")
+        self.getPlotItem().setYRange(low, high, padding=0)   # also ends autoscale
+
+    def y_range(self) -> tuple[float, float]:
+        lo, hi = self.getPlotItem().getViewBox().viewRange()[1]
+        return float(lo), float(hi)
+
+    def x_range(self) -> tuple[float, float]:
+        lo, hi = self.getPlotItem().getViewBox().viewRange()[0]
+        return float(lo), float(hi)
+
+    def plot_width(self) -> float:
+        """Width of the data area in pixels (the decimation target)."""
+        w = self.getPlotItem().getViewBox().width()
+        return w if w >= 10 else 800.0          # not laid out yet: a typical width
+
+    # ------------------------------------------------------------ markers, text
+    def show_gaps(self, gap_x: np.ndarray, sizes: np.ndarray) -> None:
+        """Red markers at the newest gaps (reused lines), and a count in the info text."""
+        shown = gap_x[-self.MAX_GAP_MARKERS:]
+        while len(self.gap_lines) < len(shown):
+            line = pg.InfiniteLine(angle=90, movable=False, pen=self._gap_pen)
+            self.getPlotItem().addItem(line, ignoreBounds=True)
+            self.gap_lines.append(line)
+        for line, x in zip(self.gap_lines, shown.tolist()):
+            if line.value() != x:
+                line.setValue(x)
+            line.show()
+        for line in self.gap_lines[len(shown):]:
+            line.hide()
+        self._gap_text = (f"<span style='color:#ff5050'>{len(gap_x)} gap(s), "
+                          f"{int(sizes.sum())} frames lost</span>" if len(gap_x) else "")
+        self._update_info()
+
+    def show_decimation(self, factor: int) -> None:
+        self._dec_text = f"decimated ×{factor} (min/max)" if factor > 1 else ""
+        self._update_info()
+
+    def info_text(self) -> str:
+        return self.info.textItem.toPlainText() if self.info.isVisible() else ""
+
+    def _update_info(self) -> None:
+        parts = [p for p in (self._dec_text, self._gap_text) if p]
+        html = " · ".join(parts)
+        if html != self._info_html:
+            self._info_html = html
+            self.info.setHtml(f"<span style='font-size:8pt'>{html}</span>")
+            self.info.setVisible(bool(parts))
+            self._place_info()
+
+    def _place_info(self) -> None:
+        self.info.setPos(self.getPlotItem().getViewBox().width() - 4, 2)
+
+    # ------------------------------------------------------------ cursor, mouse, drops
+    def set_cursor(self, x: float | None) -> None:
+        if x is None:
+            self.cursor.hide()
+        else:
+            self.cursor.setValue(x)
+            self.cursor.show()
+
+    def _on_mouse_moved(self, pos) -> None:
+        vb = self.getPlotItem().getViewBox()
+        if vb.sceneBoundingRect().contains(pos):
+            self.sig_mouse_x.emit(float(vb.mapSceneToView(pos).x()))
+
+    def leaveEvent(self, event) -> None:
+        self.sig_mouse_x.emit(None)
+        super().leaveEvent(event)
+
+    def dragEnterEvent(self, event) -> None:
+        if event.mimeData().hasText():
+            event.acceptProposedAction()
+        else:
+            event.ignore()
+
+    def dragMoveEvent(self, event) -> None:
+        self.dragEnterEvent(event)
+
+    def dropEvent(self, event) -> None:
+        ids = channel_ids_from_text(event.mimeData().text())
+        if ids:
+            event.acceptProposedAction()
+            self.sig_dropped.emit(ids)
+        else:
+            event.ignore()
