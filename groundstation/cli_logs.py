@@ -118,8 +118,13 @@ def _cmd_log(args) -> int:
 
 
 def _cmd_replay(args) -> int:
+    from .gui.app import display_available
     from .link import format_snapshot
     from .logs import ReplaySource
+
+    if not args.headless and display_available():
+        from .gui.app import run_gui
+        return run_gui(load_dictionary(args.protocol_dir), connect=None, replay=args.file)
 
     speed = None if args.speed == "max" else float(args.speed)
     with ReplaySource(args.file, speed=speed) as src:
@@ -175,8 +180,10 @@ def add_parsers(sub) -> None:
     a.add_argument("output")
     s.set_defaults(func=_cmd_log)
 
-    s = sub.add_parser("replay", help="replay a log through the live-link interface (headless statistics)")
+    s = sub.add_parser("replay", help="replay a log in the window (or headless statistics)")
     s.add_argument("file")
+    s.add_argument("--headless", action="store_true",
+                   help="print link statistics instead of opening the window (default without a display)")
     s.add_argument("--speed", default="max", help="0.1 to 50 (x real time) or max (default)")
     s.add_argument("--from", dest="start", type=float, default=None, help="start at this device time, s")
     s.add_argument("--interval", type=float, default=1.0, help="seconds between status lines")

@@ -57,7 +57,7 @@ def test_record_info_export_and_redecode(tmp_path):
     m = scipy.io.loadmat(mat, squeeze_me=True, struct_as_record=False)
     assert len(m["HIGH_RATE"].encoder_outer) == n
 
-    rp = gs("replay", str(log))                     # headless: the link statistics
+    rp = gs("replay", "--headless", str(log))       # the link statistics, no window
     assert rp.returncode == 0, rp.stderr
     assert f"HIGH_RATE {n} frames, 0 dropped in 0 gap(s)" in " ".join(rp.stdout.split())
 
