@@ -52,7 +52,9 @@ def test_record_then_replay_the_same_values(qtbot, window, tmp_path):
     window.recording.notes.setText("from the window")
     qtbot.mouseClick(window.recording.button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: window.session.recorder is not None
-                    and window.session.recorder.status().frames > 2400, timeout=30000)
+                    and window.session.recorder.status().frames > 1200, timeout=30000)
+    window.commands.send("SET_MODE", mode="OPEN_LOOP")      # an EVENT inside the recording
+    qtbot.waitUntil(lambda: window.session.recorder.status().frames > 2400, timeout=30000)
     qtbot.mouseClick(window.recording.button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: "stopped" in window.recording.info.text(), timeout=30000)
     logs = sorted((tmp_path / "logs").glob("*gui-test*.h5"))
@@ -64,6 +66,8 @@ def test_record_then_replay_the_same_values(qtbot, window, tmp_path):
 
     window.session.open_log(str(logs[0]))
     assert window.replay_toolbar.isVisible()
+    assert any("mode OPEN_LOOP" in text for _, _, text in window.session.replay_events)
+    qtbot.waitUntil(lambda: window.replay_bar.markers.events == window.session.replay_events, timeout=5000)
     window.session.replay.speed = None                      # as fast as possible
     window.session.replay.play()
     qtbot.waitUntil(lambda: window.session.replay.finished, timeout=30000)

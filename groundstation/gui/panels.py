@@ -357,8 +357,36 @@ class EventLog(QWidget):
             self._apply(row)
 
 
+class EventMarkers(QWidget):
+    """A thin strip above the timeline: one tick per EVENT of the log, coloured by level."""
+
+    COLOURS = {0: "#9e9e9e", 1: "#1565c0", 2: "#f9a825", 3: "#c62828", 4: "#c62828"}
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        self.setFixedHeight(8)
+        self.events: list[tuple[float, int, str]] = []
+        self.start, self.duration = 0.0, 0.0
+
+    def set_events(self, events, start: float, duration: float) -> None:
+        self.events, self.start, self.duration = events, start, duration
+        self.setToolTip("\n".join(f"{t - start:8.2f} s  {text}" for t, _, text in events[:40]))
+        self.update()
+
+    def paintEvent(self, event) -> None:
+        from PySide6.QtGui import QPainter
+        if not self.duration:
+            return
+        p = QPainter(self)
+        for t, level, _ in self.events:
+            x = int((t - self.start) / self.duration * (self.width() - 1))
+            p.fillRect(x, 0, 2, self.height(), QColor(self.COLOURS.get(level, "#9e9e9e")))
+        p.end()
+
+
 class ReplayBar(QWidget):
-    """Timeline over the whole log, play/pause, speed; seek by dragging."""
+    """Timeline over the whole log with its events marked, play/pause, speed; seek by
+    dragging."""
 
     def __init__(self, session: Session, parent=None):
         super().__init__(parent)
@@ -376,7 +404,12 @@ class ReplayBar(QWidget):
         lay.addWidget(self.play)
         lay.addWidget(QLabel("speed"))
         lay.addWidget(self.speed)
-        lay.addWidget(self.slider, 1)
+        timeline = QVBoxLayout()
+        timeline.setSpacing(0)
+        self.markers = EventMarkers()
+        timeline.addWidget(self.markers)
+        timeline.addWidget(self.slider)
+        lay.addLayout(timeline, 1)
         lay.addWidget(self.position)
         self.play.clicked.connect(self._toggle)
         self.speed.currentTextChanged.connect(self._speed)
@@ -407,6 +440,8 @@ class ReplayBar(QWidget):
         if src is None:
             return
         self.play.setText("Pause" if src.playing else "Play")
+        if self.markers.events is not self.session.replay_events:
+            self.markers.set_events(self.session.replay_events, src.start_time, src.duration)
         if not self.slider.isSliderDown() and src.duration:
             pos = (src.position or src.start_time) - src.start_time
             self.slider.setValue(int(1000 * pos / src.duration))

@@ -49,6 +49,7 @@ class Session(QObject):
         self.address: str = ""
         self.testbed: str | None = None
         self.last_uploaded_crc: int | None = None
+        self.replay_events: list[tuple[float, int, str]] = []
         self._want_connected = False
         self._attempt = 0
         self._reconnect = QTimer(self)
@@ -237,6 +238,7 @@ class Session(QObject):
         except GroundStationError as exc:
             self.sig_event.emit("ERROR", "replay", str(exc))
             return
+        self.replay_events = self._log_events(path)
         self.store.clear()
         self.limits.acknowledge()
         src.subscribe(self.store)
@@ -246,6 +248,21 @@ class Session(QObject):
         self.replay = src
         self.sig_source.emit("replay", str(path))
         src.play()
+
+    @staticmethod
+    def _log_events(path: str) -> list[tuple[float, int, str]]:
+        """(device time, level, text) of the log's EVENTs: markers for the timeline."""
+        from ..logs import LogReader
+        try:
+            with LogReader(path) as r:
+                if "EVENT" not in r.packets() or not r.n_frames("EVENT"):
+                    return []
+                ev = r.read("EVENT", ["level", "text"])
+                return [(float(t), int(lvl), str(text)) for t, lvl, text in
+                        zip(ev["device_time"], ev["level"], ev["text"])]
+        except GroundStationError as exc:
+            log.warning("no event markers: %s", exc)
+            return []
 
     def close_replay(self) -> None:
         src, self.replay = self.replay, None
