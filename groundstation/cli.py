@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
 import signal
 import sys
 import threading
@@ -65,9 +66,12 @@ def _cmd_sim(args) -> int:
         pty = PtyMasterStream()
         dev.attach_stream(pty)
         print(f"serial link on serial://{pty.slave_name}", flush=True)
+    # started by a ground station (--announce): end with it, even if it was killed
+    parent = os.getppid() if args.announce else None
     try:
         while not stop.wait(0.5):
-            pass
+            if parent is not None and os.getppid() != parent:
+                break
     except KeyboardInterrupt:
         pass
     finally:

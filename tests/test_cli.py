@@ -6,6 +6,7 @@ import os
 import re
 import shutil
 import subprocess
+import time
 import sys
 from pathlib import Path
 
@@ -68,3 +69,24 @@ def test_sim_serves_a_serial_pty_and_stops_on_sigterm():
         assert proc.wait(timeout=10) == 0
         proc.stdout.close()
         proc.stderr.close()
+
+
+def test_a_simulator_started_by_a_ground_station_ends_with_it(tmp_path):
+    """If the ground station is killed, its simulator child must not run on forever."""
+    script = ("from groundstation.sim.process import SimulatorProcess\n"
+              "import os, sys\n"
+              "sim = SimulatorProcess(); sim.start()\n"
+              "print(sim.proc.pid, flush=True)\n"
+              "os._exit(9)\n")                      # the parent dies without cleaning up
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         timeout=120, cwd=ROOT)
+    child = int(out.stdout.split()[0])
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            os.kill(child, 0)
+        except ProcessLookupError:
+            return                                    # gone
+        time.sleep(0.1)
+    os.kill(child, 9)
+    raise AssertionError("the simulator outlived the process that started it")
