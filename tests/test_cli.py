@@ -84,9 +84,11 @@ def test_a_simulator_started_by_a_ground_station_ends_with_it(tmp_path):
     deadline = time.monotonic() + 10
     while time.monotonic() < deadline:
         try:
-            os.kill(child, 0)
-        except ProcessLookupError:
+            state = Path(f"/proc/{child}/stat").read_text().rsplit(")", 1)[1].split()[0]
+        except (FileNotFoundError, ProcessLookupError):
             return                                    # gone
+        if state == "Z":
+            return                                    # exited; its new parent has not reaped it
         time.sleep(0.1)
     os.kill(child, 9)
     raise AssertionError("the simulator outlived the process that started it")
