@@ -51,6 +51,8 @@ class Session(QObject):
         self.last_uploaded_crc: int | None = None
         self.replay_events: list[tuple[float, int, str]] = []
         self._want_connected = False
+        self._closing = False
+        self._workers: list[threading.Thread] = []
         self._attempt = 0
         self._reconnect = QTimer(self)
         self._reconnect.setSingleShot(True)
@@ -77,7 +79,14 @@ class Session(QObject):
         self._want_connected = True
         self._attempt = 0
         self.sig_link_state.emit("connecting", address)
-        threading.Thread(target=self._connect_worker, name="gs-connect", daemon=True).start()
+        self._worker(self._connect_worker, "gs-connect")
+
+    def _worker(self, target, name: str) -> None:
+        """Run blocking work off the GUI thread; shutdown() waits for all of it."""
+        self._workers = [t for t in self._workers if t.is_alive()]
+        t = threading.Thread(target=target, name=name, daemon=True)
+        self._workers.append(t)
+        t.start()
 
     def _connect_worker(self) -> None:
         try:
@@ -94,6 +103,9 @@ class Session(QObject):
             client.add_link_listener(lambda s, m: self.sig_link_state.emit(s, m))
             client.add_command_listener(self._on_command_done)
             client.connect(take_over=True)
+            if self._closing or not self._want_connected:
+                client.close()                     # the operator gave up meanwhile
+                return
             self.client = client
             self._attempt = 0
             self.sig_source.emit("live", address)
@@ -108,7 +120,7 @@ class Session(QObject):
         self._reconnect.stop()
         client, self.client = self.client, None
         if client is not None:
-            threading.Thread(target=client.close, name="gs-disconnect", daemon=True).start()
+            self._worker(client.close, "gs-disconnect")
             self.sig_link_state.emit("closed", "")
         if self.sim is not None and self.address != "sim":
             self.sim.stop()
@@ -118,10 +130,16 @@ class Session(QObject):
         """Everything off: recording closed, link closed, simulator stopped.  Signals are
         blocked first: the widgets they would reach are being torn down."""
         self.blockSignals(True)
+        self._closing = True
         self.stop_recording()
         self._want_connected = False
         self._reconnect.stop()
         if self.client is not None:
+            self.client.close()
+            self.client = None
+        for t in self._workers:
+            t.join(timeout=10.0)
+        if self.client is not None:                # connected while we waited
             self.client.close()
             self.client = None
         if self.sim is not None:
@@ -143,13 +161,13 @@ class Session(QObject):
             return
         old, self.client = self.client, None
         if old is not None:
-            threading.Thread(target=old.close, daemon=True).start()
+            self._worker(old.close, "gs-close-lost")
         if self.address == "sim" and self.sim is not None and (
                 self.sim.proc is None or self.sim.proc.poll() is not None):
             self.sim.stop()
             self.sim = None                       # start a fresh simulator
         self.sig_link_state.emit("connecting", self.address)
-        threading.Thread(target=self._connect_worker, name="gs-reconnect", daemon=True).start()
+        self._worker(self._connect_worker, "gs-reconnect")
 
     # ------------------------------------------------------------------ telemetry callbacks
     def _on_block(self, block) -> None:
@@ -184,7 +202,7 @@ class Session(QObject):
                 client.command(name, on_stage=stage, **args)
             except GroundStationError as exc:
                 self.sig_event.emit("ERROR", "command", str(exc))
-        threading.Thread(target=work, name=f"gs-cmd-{name}", daemon=True).start()
+        self._worker(work, f"gs-cmd-{name}")
 
     def abort(self) -> None:
         """ABORT now, whatever the state; reported as an event if it cannot be sent."""
