@@ -81,15 +81,10 @@ def _cmd_sim(args) -> int:
 
 def _cmd_monitor(args) -> int:
     from .link import format_snapshot, open_client
-    from .sim.process import SimulatorProcess
+    from .sim.process import device_address
 
     d = load_dictionary(args.protocol_dir)
-    sim = None
-    address = args.device
-    if address == "sim":
-        sim = SimulatorProcess(pacing="realtime", testbed=args.testbed)
-        address = sim.start()
-        print(f"started the simulated testbed on {address}", flush=True)
+    address, sim = device_address(args.device, args.testbed)
     try:
         client = open_client(d, address)
         try:

@@ -15,19 +15,14 @@ def _cmd_record(args) -> int:
     from .link import format_snapshot, open_client
     from .logs import Recorder
     from .logs.live import attach_recorder
-    from .sim.process import SimulatorProcess
+    from .sim.process import device_address
     from .sim.testbed import load_testbed
 
     d = load_dictionary(args.protocol_dir)
     testbed = load_testbed(args.testbed) if args.testbed else None
     stop = threading.Event()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    sim = None
-    address = args.device
-    if address == "sim":
-        sim = SimulatorProcess(pacing="realtime", testbed=args.testbed)
-        address = sim.start()
-        print(f"started the simulated testbed on {address}", flush=True)
+    address, sim = device_address(args.device, args.testbed)
     failures: list[str] = []
     try:
         client = open_client(d, address)
