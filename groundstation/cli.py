@@ -46,7 +46,9 @@ def _cmd_sim(args) -> int:
     from .sim.testbed import load_testbed
 
     stop = threading.Event()
+    # Ctrl-C and SIGTERM both ask for a clean stop, whenever they come (even during start)
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    signal.signal(signal.SIGINT, lambda *_: stop.set())
     testbed = load_testbed(args.testbed)        # refuses a bad file before anything starts
     dev = SimulatedDevice(load_dictionary(args.protocol_dir), host=args.host,
                           tcp_port=args.tcp_port, pacing=args.pacing, seed=args.seed,
@@ -72,8 +74,6 @@ def _cmd_sim(args) -> int:
         while not stop.wait(0.5):
             if parent is not None and os.getppid() != parent:
                 break
-    except KeyboardInterrupt:
-        pass
     finally:
         dev.stop()
     return 0
