@@ -32,7 +32,11 @@ from __future__ import annotations
 
 SCHEMA = "groundstation-log"
 SCHEMA_VERSION = 1
-CHUNK_ROWS = 8192                 # rows per chunk of a per-frame dataset
+# rows per chunk of a per-frame dataset: about what arrives between two flushes (0.25 s
+# = 300 HIGH_RATE frames), so live recording writes whole chunks; larger chunks get
+# rewritten, compressed anew, at every flush and leave the old copies as dead space
+# (measured: 8192 rows made live files 6.5x larger than batch-written ones; 256 none)
+CHUNK_ROWS = 256
 STREAM_CHUNK = 65536              # bytes per chunk of a byte stream
 
 JOURNAL_KINDS = ("note", "command", "event", "parameter_table", "profile",
