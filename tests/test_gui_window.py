@@ -95,8 +95,9 @@ def test_escape_aborts_from_any_state(qtbot, window):
                                 for r in range(window.events.table.rowCount())), timeout=10000)
 
 
-def test_link_loss_is_shown_and_the_link_comes_back(qtbot, window):
+def test_link_loss_is_shown_and_the_link_comes_back(qtbot, window, tmp_path):
     connect(qtbot, window)
+    window.session.start_recording(str(tmp_path), "across a link loss")
     before = hr_frames(window)
     window.session.sim.proc.kill()                           # the simulator dies
     qtbot.waitUntil(lambda: "LINK LOST" in window.connection.health.text()
@@ -105,7 +106,10 @@ def test_link_loss_is_shown_and_the_link_comes_back(qtbot, window):
     qtbot.waitUntil(lambda: window.session.client is not None
                     and window.session.client.link_state == "up", timeout=60000)
     resumed = hr_frames(window)
+    recorded = window.session.recorder.status().frames
     qtbot.waitUntil(lambda: hr_frames(window) > resumed + 600, timeout=30000)
+    # the recording goes on with the new link
+    qtbot.waitUntil(lambda: window.session.recorder.status().frames > recorded + 600, timeout=30000)
 
 
 def test_layout_and_chart_channels_survive_a_restart(qtbot, dictionary, tmp_path):

@@ -75,6 +75,9 @@ class Session(QObject):
     def _start_link(self, address: str) -> None:
         self.close_replay()
         self.disconnect_link()
+        if address != "sim" and self.sim is not None:   # leaving the simulator behind
+            self.sim.stop()
+            self.sim = None
         self.address = address
         self._want_connected = True
         self._attempt = 0
@@ -107,6 +110,8 @@ class Session(QObject):
                 client.close()                     # the operator gave up meanwhile
                 return
             self.client = client
+            if self.recorder is not None and self.recorder.state == "recording":
+                attach_recorder(client, self.recorder)   # a reconnect keeps recording
             self._attempt = 0
             self.sig_source.emit("live", address)
             self.sig_link_state.emit("up", address)
