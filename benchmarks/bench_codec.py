@@ -13,15 +13,13 @@ Run: .venv/bin/python benchmarks/bench_codec.py [--frames N]
 from __future__ import annotations
 
 import argparse
-import json
-import platform
 import struct
 import time
 import zlib
-from pathlib import Path
 
 import numpy as np
 
+from common import machine, save
 from groundstation.codec import StreamDeframer, FrameCodec
 from groundstation.codec.crc import RESIDUE
 from groundstation.dictionary import load_dictionary
@@ -98,8 +96,7 @@ def main() -> dict:
         "limit_frames_per_s": n / t_lim, "limit_MB_per_s": mb / t_lim,
         "ours_vs_baseline": t_base / t_ours, "ours_vs_limit": t_lim / t_ours,
         "ours_vs_link_rate": n / t_ours / LINK_RATE_HZ,
-        "machine": f"{platform.processor() or platform.machine()}, {platform.system()} "
-                   f"{platform.release()}, Python {platform.python_version()}, numpy {np.__version__}",
+        "machine": f"{machine()}, numpy {np.__version__}",
     }
     print(f"decode of {n:,} HIGH_RATE frames ({res['frame_bytes']} B each, {mb:.1f} MB), CRC checked")
     print(f"  ours      {res['ours_frames_per_s']:>12,.0f} frames/s  {res['ours_MB_per_s']:8.1f} MB/s")
@@ -107,9 +104,7 @@ def main() -> dict:
     print(f"  limit     {res['limit_frames_per_s']:>12,.0f} frames/s  {res['limit_MB_per_s']:8.1f} MB/s  (numpy copy)")
     print(f"  ours / baseline = {res['ours_vs_baseline']:.1f}x   ours / limit = {res['ours_vs_limit']:.3f}   "
           f"ours / link rate (1200 Hz) = {res['ours_vs_link_rate']:,.0f}x")
-    out = Path(__file__).parent / "results"
-    out.mkdir(exist_ok=True)
-    (out / "codec.json").write_text(json.dumps(res, indent=2))
+    save("codec", res)
     return res
 
 

@@ -17,15 +17,14 @@ Run: .venv/bin/python benchmarks/bench_logs.py [--hours 1.0] [--compare-minutes 
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
 
+from common import machine, save
 from groundstation.codec import StreamDeframer
 from groundstation.dictionary import load_dictionary
 from groundstation.logs import Recorder
@@ -96,8 +95,7 @@ def main() -> dict:
     ap.add_argument("--compare-minutes", type=float, default=10.0)
     args = ap.parse_args()
     d = load_dictionary()
-    res: dict = {"machine": f"{platform.machine()}, {os.cpu_count()} cores, Python "
-                            f"{platform.python_version()}", "layouts": {}}
+    res: dict = {"machine": machine(), "layouts": {}}
     with tempfile.TemporaryDirectory(dir=os.environ.get("BENCH_TMP")) as tmp:
         print(f"recorder, {args.compare_minutes:g} min of HIGH_RATE+HOUSEKEEPING per layout:")
         for name, layout in LAYOUTS.items():
@@ -114,9 +112,7 @@ def main() -> dict:
               f"({hour['channel_samples']:,} samples): {hour['open_and_read_channel_s']:.2f} s "
               f"(target < 1 s); 10 s window from the middle: {hour['read_10s_window_ms']:.1f} ms "
               f"(target < 50 ms); written at {hour['write_x_link']:.0f}x the link")
-    out = Path(__file__).parent / "results"
-    out.mkdir(exist_ok=True)
-    (out / "logs.json").write_text(json.dumps(res, indent=2))
+    save("logs", res)
     return res
 
 

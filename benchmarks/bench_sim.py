@@ -18,9 +18,7 @@ Run: .venv/bin/python benchmarks/bench_sim.py [--paced-seconds 60]
 from __future__ import annotations
 
 import argparse
-import json
 import os
-import platform
 import time
 import zlib
 from pathlib import Path
@@ -28,6 +26,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
+from common import machine, save
 from groundstation.codec.frames import encode_items
 from groundstation.dictionary import load_dictionary
 from groundstation.link import open_client
@@ -160,8 +159,7 @@ def main() -> dict:
     ap.add_argument("--paced-seconds", type=float, default=60.0)
     args = ap.parse_args()
     d = load_dictionary()
-    res = {"machine": f"{platform.machine()}, {os.cpu_count()} cores, {platform.system()} "
-                      f"{platform.release()}, Python {platform.python_version()}"}
+    res = {"machine": machine()}
     res.update(fast_mode(d, args.fast_seconds))
     print(f"fast mode, 2-DOF inertial, DB-DHM, 3 x 12-section cascades, compensation on "
           f"({args.fast_seconds:g} s simulated):")
@@ -177,9 +175,7 @@ def main() -> dict:
               f"{res['paced_lateness_ms_p99']:.2f} ms  max {res['paced_lateness_ms_max']:.2f} ms"
               f"   (target p99 < 5 ms)")
         print(f"  simulator CPU {res['paced_sim_cpu_percent']:.0f} % of one core")
-    out = Path(__file__).parent / "results"
-    out.mkdir(exist_ok=True)
-    (out / "sim.json").write_text(json.dumps(res, indent=2))
+    save("sim", res)
     return res
 
 

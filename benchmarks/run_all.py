@@ -11,9 +11,10 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).parent
-BENCHES = ["bench_codec.py", "bench_sim.py", "bench_logs.py"]
+BENCHES = ["bench_codec.py", "bench_sim.py", "bench_logs.py", "bench_gui.py"]
 
 if __name__ == "__main__":
+    sys.path.insert(0, str(HERE))           # the benchmarks import common.py beside them
     for name in BENCHES:
         print(f"== {name}", flush=True)
         sys.argv = [str(HERE / name)]

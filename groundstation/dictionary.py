@@ -10,7 +10,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -18,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from .errors import DictionaryError
+from .tomlfile import read_toml
 
 #: wire type name -> big-endian numpy dtype string
 WIRE_TYPES: dict[str, str] = {
@@ -251,16 +251,7 @@ class Dictionary:
 
 
 def _read_toml(path: Path) -> tuple[dict, str]:
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise DictionaryError(f"{path}: protocol file not found") from None
-    except OSError as exc:
-        raise DictionaryError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        return tomllib.loads(text), text
-    except tomllib.TOMLDecodeError as exc:
-        raise DictionaryError(f"{path}: malformed TOML: {exc}") from None
+    return read_toml(path, DictionaryError, "protocol file not found")
 
 
 def _require(table: dict, key: str, where: str, kinds: type | tuple[type, ...]):

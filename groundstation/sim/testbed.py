@@ -9,12 +9,12 @@ before anything starts: the simulator never runs half-configured.
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from ..errors import GroundStationError
+from ..tomlfile import read_toml
 
 PROFILES_DIR = Path(__file__).resolve().parent.parent.parent / "profiles"
 TESTBEDS_DIR = PROFILES_DIR / "testbeds"
@@ -156,16 +156,7 @@ def _section(doc: dict, name: str, schema: dict, path: Path, required: bool = Tr
 def load_testbed(path: str | Path | None = None) -> Testbed:
     """Read and check a testbed file (default: the 2-DOF relative configuration)."""
     path = Path(path) if path is not None else DEFAULT_TESTBED
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise TestbedConfigError(f"{path}: testbed file not found (see {TESTBEDS_DIR})") from None
-    except OSError as exc:
-        raise TestbedConfigError(f"{path}: cannot read ({exc.strerror})") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise TestbedConfigError(f"{path}: malformed TOML: {exc}") from None
+    doc, text = read_toml(path, TestbedConfigError, f"testbed file not found (see {TESTBEDS_DIR})")
 
     tb = _section(doc, "testbed", SCHEMA["testbed"], path)
     if tb["configuration"] not in ("1dof", "2dof"):
