@@ -12,12 +12,16 @@ from __future__ import annotations
 
 import threading
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
 from .codec import TelemetryBlock
 from .dictionary import Dictionary, PacketDef
 from .link.stats import SEQ_MOD, TickUnwrapper
+
+#: device time going back by more than this between frames is a reboot, not reordering
+RESTART_BACKSTEP_S = 1.0
 
 
 @dataclass
@@ -50,6 +54,9 @@ class PacketRing:
         self._unwrap = TickUnwrapper()
         self._gaps: list[tuple[float, int]] = []
         self._lock = threading.Lock()
+        self.restarts = 0              # times the device clock went back (reboots)
+        #: called (receiver thread) with (packet, old newest time s, new first time s)
+        self.on_restart: Callable[[str, float, float], None] | None = None
 
     @staticmethod
     def _is_text(packet: PacketDef, name: str) -> bool:
@@ -60,12 +67,40 @@ class PacketRing:
         n = len(block)
         if not n:
             return
-        seq = block.columns["sequence"].astype(np.int64)
-        dev = self._unwrap.unwrap(block.columns["tick"]) / self.rate
+        ticks = block.columns["tick"]
+        dev = self._unwrap.unwrap(ticks) / self.rate
+        with self._lock:
+            newest = float(self._device_time[(self._head - 1) % self.capacity]) if self._count else None
+        before = np.concatenate(([newest if newest is not None else dev[0]], dev[:-1]))
+        restart = np.flatnonzero(dev < before - RESTART_BACKSTEP_S)
+        if not len(restart):
+            self._append_range(block, 0, n, dev)
+            return
+        # The device's clock went back: it rebooted (or a fresh simulator answered a
+        # reconnect).  Its old and new times would interleave on the time axis, so the
+        # old history is dropped from the display; the recording keeps all of it.
+        r = int(restart[0])
+        if r:
+            self._append_range(block, 0, r, dev[:r])
+        with self._lock:
+            old_end = float(self._device_time[(self._head - 1) % self.capacity]) if self._count else 0.0
+        self.clear()
+        self.restarts += 1
+        dev = self._unwrap.unwrap(ticks[r:]) / self.rate
+        self._append_range(block, r, n, dev)
+        if self.on_restart is not None:
+            self.on_restart(self.packet.name, old_end, float(dev[0]))
+
+    def _append_range(self, block: TelemetryBlock, a: int, b: int, dev: np.ndarray) -> None:
+        """Store block rows a..b-1 (dev: their device times)."""
+        n = b - a
+        seq = block.columns["sequence"][a:b].astype(np.int64)
         prev = np.concatenate(([self._last_seq if self._last_seq is not None else seq[0] - 1], seq[:-1]))
         step = (seq - prev) % SEQ_MOD
         lost = np.flatnonzero((step > 1) & (step < SEQ_MOD // 2))
-        host = np.broadcast_to(np.asarray(block.host_time, dtype=np.float64), (n,))
+        host_all = np.asarray(block.host_time, dtype=np.float64)
+        host = np.broadcast_to(host_all, (len(block),))[a:b] if host_all.ndim == 0 else host_all[a:b]
+        columns = {c: block.columns[c][a:b] for c in self.channels}
         with self._lock:
             self._last_seq = int(seq[-1])
             self.total_frames += n
@@ -75,22 +110,22 @@ class PacketRing:
                 del self._gaps[:-10000]
             if n >= self.capacity:                     # keep only the newest capacity
                 sl = slice(n - self.capacity, n)
-                self._write(0, sl, block, dev, host)
+                self._write(0, sl, columns, dev, host)
                 self._head, self._count = 0, self.capacity
                 return
             first = min(n, self.capacity - self._head)
-            self._write(self._head, slice(0, first), block, dev, host)
+            self._write(self._head, slice(0, first), columns, dev, host)
             if first < n:
-                self._write(0, slice(first, n), block, dev, host)
+                self._write(0, slice(first, n), columns, dev, host)
             self._head = (self._head + n) % self.capacity
             self._count = min(self.capacity, self._count + n)
 
-    def _write(self, at: int, src: slice, block: TelemetryBlock, dev, host) -> None:
+    def _write(self, at: int, src: slice, columns: dict[str, np.ndarray], dev, host) -> None:
         k = src.stop - src.start
         self._device_time[at:at + k] = dev[src]
         self._host_time[at:at + k] = host[src]
         for c in self.channels:
-            self._data[c][at:at + k] = block.columns[c][src]
+            self._data[c][at:at + k] = columns[c][src]
 
     def snapshot(self, channels: list[str], seconds: float | None = None) -> Snapshot:
         """The newest `seconds` of device time (all that is kept if None)."""
@@ -140,7 +175,15 @@ class TelemetryStore:
                 continue
             rate = p.rate_hz or 10.0
             cap = max(1024, int(seconds * rate * 1.05))
-            self.rings[p.name] = PacketRing(p, cap, dictionary.control_rate_hz)
+            ring = PacketRing(p, cap, dictionary.control_rate_hz)
+            ring.on_restart = self._restarted
+            self.rings[p.name] = ring
+        #: called from the receiver thread when a packet's device time goes back (reboot)
+        self.on_restart: Callable[[str, float, float], None] | None = None
+
+    def _restarted(self, packet: str, old_end_s: float, new_start_s: float) -> None:
+        if self.on_restart is not None:
+            self.on_restart(packet, old_end_s, new_start_s)
 
     def __call__(self, block: TelemetryBlock) -> None:
         ring = self.rings.get(block.name)
@@ -167,21 +210,16 @@ def peak_decimate(x: np.ndarray, y: np.ndarray, bins: int) -> tuple[np.ndarray, 
     per = int(np.ceil(n / bins))
     m = n // per
     yb = y[:m * per].reshape(m, per)
-    with np.errstate(invalid="ignore"):
-        lo = np.nanmin(np.where(np.isnan(yb), np.inf, yb), axis=1)
-        hi = np.nanmax(np.where(np.isnan(yb), -np.inf, yb), axis=1)
-    has_gap = np.isnan(yb).any(axis=1)
-    lo[has_gap] = np.nan
-    hi[has_gap] = np.nan
-    xb = x[:m * per:per]
-    xs = np.repeat(xb, 2)
+    # Plain min/max, not nanmin: NaN propagates, which is exactly the gap rule above,
+    # and it is four times faster than masking (this runs for every curve every frame).
+    xs = np.repeat(x[:m * per:per], 2)
     ys = np.empty(2 * m)
-    ys[0::2], ys[1::2] = lo, hi
+    np.min(yb, axis=1, out=ys[0::2])
+    np.max(yb, axis=1, out=ys[1::2])
     if m * per < n:                                 # the tail bin, exactly
         tail = y[m * per:]
         xs = np.concatenate([xs, x[m * per:m * per + 1].repeat(2)])
-        ys = np.concatenate([ys, [np.nanmin(tail) if not np.isnan(tail).any() else np.nan,
-                                  np.nanmax(tail) if not np.isnan(tail).any() else np.nan]])
+        ys = np.concatenate([ys, [tail.min(), tail.max()]])
     return xs, ys, True
 
 

@@ -229,7 +229,7 @@ def test_drop_move_and_menu(panel, store, dictionary):
                                   ["HIGH_RATE.gyro_rate", "HIGH_RATE.encoder_inner"]]
     panel.remove_plot(0)
     assert panel.layout_ids() == [["HIGH_RATE.gyro_rate", "HIGH_RATE.encoder_inner"]]
-    assert panel.plots[0].time_axis.style["showValues"]
+    assert panel.plots[0].time_axis.isVisibleTo(panel.plots[0].getPlotItem())
 
 
 def test_cursor_readout_and_host_timebase(panel, store, dictionary):

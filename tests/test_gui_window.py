@@ -42,7 +42,10 @@ def test_live_data_reaches_the_charts_and_the_status(qtbot, window):
     x, y = curves[0].getData()
     assert x is not None and len(x) > 100 and np.isfinite(y).any()
     qtbot.waitUntil(lambda: window.status_panel.fields["mode"].text() == "IDLE", timeout=5000)
-    assert "HIGH_RATE" in window.connection.health.text() or window.connection.health.text()
+    qtbot.waitUntil(lambda: "frames/s" in window.connection.health.text(), timeout=5000)
+    assert "dropped" in window.connection.health.text()
+    assert "HIGH_RATE" in window.connection.health.toolTip()       # the full line per packet
+    assert window.minimumSizeHint().width() < 1400                  # the text never widens the window
 
 
 def test_record_then_replay_the_same_values(qtbot, window, tmp_path):
@@ -98,6 +101,8 @@ def test_escape_aborts_from_any_state(qtbot, window):
 def test_link_loss_is_shown_and_the_link_comes_back(qtbot, window, tmp_path):
     connect(qtbot, window)
     window.session.start_recording(str(tmp_path), "across a link loss")
+    ring = window.session.store.ring("HIGH_RATE")
+    qtbot.waitUntil(lambda: ring.snapshot([], seconds=0.0).device_time[-1:].sum() > 1.5, timeout=15000)
     before = hr_frames(window)
     window.session.sim.proc.kill()                           # the simulator dies
     qtbot.waitUntil(lambda: "LINK LOST" in window.connection.health.text()
@@ -105,9 +110,13 @@ def test_link_loss_is_shown_and_the_link_comes_back(qtbot, window, tmp_path):
     assert hr_frames(window) >= before                       # nothing received is lost
     qtbot.waitUntil(lambda: window.session.client is not None
                     and window.session.client.link_state == "up", timeout=60000)
-    resumed = hr_frames(window)
+    # a fresh simulator's clock starts again at 0: the charts restart instead of
+    # interleaving old and new samples, and the operator is told why
+    qtbot.waitUntil(lambda: ring.restarts == 1 and hr_frames(window) > 600, timeout=30000)
+    assert np.all(np.diff(ring.snapshot([]).device_time) > 0)
+    qtbot.waitUntil(lambda: any("device time restarted" in window.events.table.item(r, 3).text()
+                                for r in range(window.events.table.rowCount())), timeout=10000)
     recorded = window.session.recorder.status().frames
-    qtbot.waitUntil(lambda: hr_frames(window) > resumed + 600, timeout=30000)
     # the recording goes on with the new link
     qtbot.waitUntil(lambda: window.session.recorder.status().frames > recorded + 600, timeout=30000)
 

@@ -423,3 +423,26 @@ def test_addresses():
     assert (a.kind, a.host, a.port, a.telemetry) == ("tcp", "192.168.1.20", 5020, "udp")
     s = parse_address("serial:///dev/ttyUSB0?baud=115200")
     assert (s.kind, s.serial_port, s.baud) == ("serial", "/dev/ttyUSB0", 115200)
+
+
+def test_udp_batches_keep_each_datagrams_arrival_time():
+    """The reader may wait to batch datagrams; each keeps the time it arrived, so the
+    latency statistics do not grow by the batching delay."""
+    import time
+    rx = UdpReceiver("127.0.0.1", 0)
+    tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sent_at = time.time()
+        for i in range(5):
+            tx.sendto(bytes([i]) * 10, (rx.host, rx.port))
+        datagrams, times = rx.receive(1.0, coalesce_s=0.3)
+        returned_at = time.time()
+    finally:
+        tx.close()
+        rx.close()
+    assert [d[0] for d in datagrams] == [0, 1, 2, 3, 4]
+    assert times == sorted(times)
+    if rx.kernel_timestamps:
+        # stamped on arrival, before the 0.3 s batching wait, not when drained after it
+        assert times[-1] < returned_at - 0.25
+    assert times[0] >= sent_at - 1.0

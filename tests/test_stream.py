@@ -58,3 +58,25 @@ def test_gaps_survive_decimation_and_break_the_line():
     assert np.isnan(yb[10]) and len(yb) == 21 and tb[10] == tb[11] == 10.0
     xs, ys, _ = peak_decimate(tb, yb, 4)
     assert np.isnan(ys).any()
+
+
+def test_a_device_reboot_restarts_the_display_history(dictionary):
+    """Device time going back (a reboot, a fresh simulator after a lost link) must not
+    interleave old and new samples on the time axis."""
+    codec = FrameCodec(dictionary)
+    store = TelemetryStore(dictionary, seconds=10.0)
+    seen = []
+    store.on_restart = lambda *a: seen.append(a)
+    ring = store.ring("HIGH_RATE")
+    store(hr_block(codec, np.arange(0, 4000)))
+    store(hr_block(codec, np.arange(3998, 4100)))            # two repeated: reordering, not a reboot
+    assert ring.restarts == 0 and not seen
+    store(hr_block(codec, np.concatenate([np.arange(4100, 5000), np.arange(10, 500)])))
+    assert ring.restarts == 1
+    assert seen == [("HIGH_RATE", 4999 / 1200, 10 / 1200)]
+    snap = ring.snapshot(["encoder_outer"])
+    assert snap.device_time[0] == 10 / 1200 and snap.device_time[-1] == 499 / 1200
+    assert np.all(np.diff(snap.device_time) > 0) and snap.total_frames == 490
+    assert len(snap.gap_sizes) == 0
+    store(hr_block(codec, np.arange(500, 600)))
+    assert ring.snapshot(["tick"]).values["tick"][-1] == 599 and ring.restarts == 1

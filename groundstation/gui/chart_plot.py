@@ -40,8 +40,11 @@ class _TimeAxis(pg.DateAxisItem):
         self.set_shown(self.shown)
 
     def set_shown(self, shown: bool) -> None:
+        # Hidden outright, not just unlabelled: a shown axis regenerates its ticks on
+        # every scroll step, and three invisible time axes cost more per frame than
+        # drawing all the curves (measured in benchmarks/bench_gui.py).
         self.shown = shown
-        self.setStyle(showValues=shown)
+        self.setVisible(shown)
         self.showLabel(shown)
 
 

@@ -12,7 +12,7 @@ from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QFont
 from PySide6.QtWidgets import (QCheckBox, QComboBox, QFormLayout, QGridLayout, QHBoxLayout,
                                QHeaderView, QLabel, QLineEdit, QListWidget, QListWidgetItem,
-                               QMessageBox, QPushButton, QSlider, QTableWidget,
+                               QMessageBox, QPushButton, QSizePolicy, QSlider, QTableWidget,
                                QTableWidgetItem, QVBoxLayout, QWidget)
 
 from ..link import format_snapshot
@@ -50,6 +50,9 @@ class ConnectionBar(QWidget):
         self.lamp = QLabel()
         self.lamp.setStyleSheet(lamp_style(LAMP["closed"]))
         self.health = QLabel("not connected")
+        # the text changes every second; it must never set the window's minimum width
+        self.health.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        self.health.setMinimumWidth(220)
         for w in (QLabel("Source"), self.kind, self.testbed, self.address, self.serial, self.baud,
                   self.connect_button, self.lamp):
             lay.addWidget(w)
@@ -101,8 +104,28 @@ class ConnectionBar(QWidget):
         src = self.session.source
         if src is None or getattr(src, "link_state", "") not in ("up",):
             return
+        snap = src.stats.snapshot()
         self.health.setStyleSheet("")
-        self.health.setText(format_snapshot(src.stats.snapshot()))
+        self.health.setText(_compact_health(snap))
+        self.health.setToolTip(format_snapshot(snap).replace(" | ", "\n"))
+
+
+def _compact_health(snap) -> str:
+    """The link's health in a few words for the bar; the full per-packet line is the
+    tooltip.  Errors are named only when there are some, so a healthy link reads short."""
+    hr = snap.packets.get("HIGH_RATE")
+    dropped = sum(ps.dropped for name, ps in snap.packets.items() if name != "RESPONSE")
+    parts = [f"{hr.rate_hz:.0f} frames/s" if hr is not None else "no HIGH_RATE yet",
+             f"dropped {dropped}"]
+    f = snap.framing
+    crc = f.get("crc_errors", 0)
+    parts.append(f"CRC errors {crc}")
+    other = f.get("resyncs", 0) + f.get("version_errors", 0)
+    if other:
+        parts.append(f"resyncs {f.get('resyncs', 0)} · version errors {f.get('version_errors', 0)}")
+    if snap.latency_ms_mean is not None:
+        parts.append(f"latency {snap.latency_ms_mean:.1f} ms")
+    return " · ".join(parts)
 
 
 class StatusPanel(QWidget):

@@ -41,6 +41,7 @@ class Session(QObject):
         super().__init__(parent)
         self.d = dictionary
         self.store = TelemetryStore(dictionary, store_seconds)
+        self.store.on_restart = self._on_device_restart
         self.limits = LimitMonitor(dictionary)
         self.client: DeviceClient | None = None
         self.replay: ReplaySource | None = None
@@ -183,6 +184,12 @@ class Session(QObject):
         for lvl, code, text in zip(block["level"], block["code"], block["text"]):
             self.sig_event.emit(levels.get(int(lvl), str(lvl)), "device",
                                 f"{self.d.event_name(int(code))}: {text}")
+
+    def _on_device_restart(self, packet: str, old_end_s: float, new_start_s: float) -> None:
+        """Receiver thread: the device clock went back (a reboot or a fresh simulator)."""
+        self.sig_event.emit("WARNING", "link",
+                            f"device time restarted ({packet}: {old_end_s:.3f} s -> {new_start_s:.3f} s): "
+                            "the device rebooted; the charts start again, the recording keeps everything")
 
     def _on_command_done(self, result) -> None:
         last = result.stages[-1] if result.stages else None

@@ -99,6 +99,10 @@ class DeviceClient:
         self.device_info: dict[str, Any] = {}
         self.link_state = "closed"
         self.link_error: str = ""
+        #: how long the telemetry reader lets datagrams gather after waking (UdpReceiver.receive):
+        #: 10 ms batches a 1200 Hz stream 12 frames at a time, at no cost in latency
+        #: (arrival times are the kernel's) and a tenth of the per-wake-up interpreter time.
+        self.telemetry_batch_s = 0.010
         self.heartbeat_failures = 0
         self.unmatched_responses = 0
         self.subscriber_errors = 0
@@ -170,7 +174,7 @@ class DeviceClient:
         assert self.telemetry is not None and self._datagrams is not None
         while not self._stop.is_set():
             try:
-                datagrams, times = self.telemetry.receive(0.1)
+                datagrams, times = self.telemetry.receive(0.1, coalesce_s=self.telemetry_batch_s)
             except LinkLostError as exc:
                 if not self._stop.is_set():
                     self._lost(str(exc))
