@@ -128,15 +128,21 @@ class PacketRing:
             self._data[c][at:at + k] = columns[c][src]
 
     def snapshot(self, channels: list[str], seconds: float | None = None) -> Snapshot:
-        """The newest `seconds` of device time (all that is kept if None)."""
+        """The newest `seconds` of device time (all that is kept if None).
+
+        Copies only the samples asked for: the ring holds ten minutes, a chart shows
+        one, and copying the whole ring on every redraw made the GUI slower the longer
+        it ran (measured with benchmarks/bench_gui.py)."""
         with self._lock:
-            order = self._order()
-            dev = self._device_time[order]
-            if seconds is not None and len(dev):
-                start = int(np.searchsorted(dev, dev[-1] - seconds, side="left"))
-                order, dev = order[start:], dev[start:]
-            values = {c: self._data[c][order] for c in channels if c in self._data}
-            host = self._host_time[order]
+            parts = self._segments()
+            start = 0
+            if seconds is not None and self._count:
+                newest = self._device_time[(self._head - 1) % self.capacity]
+                start = self._logical_search(parts, newest - seconds)
+            pieces = self._from(parts, start)
+            dev = self._gather(self._device_time, pieces)
+            host = self._gather(self._host_time, pieces)
+            values = {c: self._gather(self._data[c], pieces) for c in channels if c in self._data}
             gaps = np.array(self._gaps, dtype=np.float64).reshape(-1, 2)
             total = self.total_frames
         if len(dev):
@@ -144,10 +150,41 @@ class PacketRing:
             gaps = gaps[keep]
         return Snapshot(dev, host, values, gaps[:, 0], gaps[:, 1].astype(np.int64), total)
 
-    def _order(self) -> np.ndarray:
+    def _segments(self) -> list[slice]:
+        """Physical slices of the ring in time order (oldest first)."""
         if self._count < self.capacity:
-            return np.arange(self._count)
-        return (np.arange(self.capacity) + self._head) % self.capacity
+            return [slice(0, self._count)]
+        return [slice(self._head, self.capacity), slice(0, self._head)]
+
+    def _logical_search(self, parts: list[slice], t: float) -> int:
+        """Logical index of the first sample with device time >= t."""
+        offset = 0
+        for sl in parts:
+            seg = self._device_time[sl]
+            if len(seg) and seg[-1] >= t:
+                return offset + int(np.searchsorted(seg, t, side="left"))
+            offset += len(seg)
+        return offset
+
+    @staticmethod
+    def _from(parts: list[slice], start: int) -> list[slice]:
+        out = []
+        for sl in parts:
+            n = sl.stop - sl.start
+            if start < n:
+                out.append(slice(sl.start + start, sl.stop))
+                start = 0
+            else:
+                start -= n
+        return out
+
+    @staticmethod
+    def _gather(arr: np.ndarray, pieces: list[slice]) -> np.ndarray:
+        if len(pieces) == 1:
+            return arr[pieces[0]].copy()
+        if not pieces:
+            return arr[:0].copy()
+        return np.concatenate([arr[sl] for sl in pieces])
 
     def clear(self) -> None:
         with self._lock:

@@ -80,3 +80,23 @@ def test_a_device_reboot_restarts_the_display_history(dictionary):
     assert len(snap.gap_sizes) == 0
     store(hr_block(codec, np.arange(500, 600)))
     assert ring.snapshot(["tick"]).values["tick"][-1] == 599 and ring.restarts == 1
+
+
+def test_windowed_snapshots_match_the_whole_ring_at_every_wrap_position(dictionary):
+    codec = FrameCodec(dictionary)
+    store = TelemetryStore(dictionary, seconds=1.0)           # capacity 1260
+    ring = store.ring("HIGH_RATE")
+    rng = np.random.default_rng(7)
+    tick = 0
+    for _ in range(40):
+        n = int(rng.integers(1, 700))
+        store(hr_block(codec, np.arange(tick, tick + n)))
+        tick += n
+        whole = ring.snapshot(["encoder_outer"])
+        kept = min(tick, ring.capacity)
+        assert np.array_equal(whole.device_time, np.arange(tick - kept, tick) / 1200)
+        for seconds in (0.0, 0.01, 0.3, 0.9, 5.0):
+            part = ring.snapshot(["encoder_outer"], seconds=seconds)
+            keep = whole.device_time >= whole.device_time[-1] - seconds
+            assert np.array_equal(part.device_time, whole.device_time[keep])
+            assert np.array_equal(part.values["encoder_outer"], whole.values["encoder_outer"][keep])
