@@ -112,6 +112,13 @@ class DeviceClient:
         """Call `callback(block)` for every decoded telemetry block (receiver thread)."""
         self._subscribers.append(callback)
 
+    def unsubscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
+        """Stop calling `callback` (no error if it was not subscribed)."""
+        try:
+            self._subscribers.remove(callback)
+        except ValueError:
+            pass
+
     def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
         """Call `callback(state, message)` on link state changes ('up', 'lost', 'closed')."""
         self._link_listeners.append(callback)

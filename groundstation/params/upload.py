@@ -1,0 +1,314 @@
+"""Putting a parameter table on the device and proving it is there.
+
+The sequence (SPEC.md §11.1): check the table here, read the active table back (it
+becomes the rollback point), PARAM_BEGIN, the table in PARAM_WRITE blocks, PARAM_COMMIT
+with the CRC-32 of the whole table (the device checks the CRC and validates the table
+again, then activates it between two control periods), read the active table back and
+compare it byte for byte and entry by entry, and wait for HOUSEKEEPING to report the new
+CRC.  Only then is the upload "verified" and added to the history.
+
+No Qt here: the CLI, the GUI's parameter panel and campaigns use the same class.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+import numpy as np
+
+from ..dictionary import Dictionary
+from ..errors import CommandFailed, CommandRejected, GroundStationError
+from . import table as ptable
+
+#: how long HOUSEKEEPING (10 Hz) may take to show the new CRC after the commit
+HOUSEKEEPING_WAIT_S = 3.0
+
+#: what a device's refusal means for an operator
+_REASON_ADVICE = {
+    "INVALID_STATE": "the device refuses to change its table while armed - disarm first",
+    "CRC_MISMATCH": "the table arrived corrupted (CRC mismatch); the previous table stays active - upload again",
+    "VALIDATION_FAILED": "the device's own validation refused the table; the previous table stays active",
+    "OUT_OF_RANGE": "the device expects a table of another size - are host and device on the same protocol?",
+    "NOTHING_STAGED": "the device lost the staged table (another upload or a reboot?) - upload again",
+}
+
+
+class UploadError(GroundStationError):
+    """An upload did not end with the table verified on the device."""
+
+
+class VerifyError(UploadError):
+    """The device reports a table other than the one sent."""
+
+
+@dataclass
+class ActiveTable:
+    """A parameter table as read from the device."""
+
+    blob: bytes
+    crc: int
+    values: dict[str, Any]
+
+    @classmethod
+    def from_blob(cls, dictionary: Dictionary, blob: bytes) -> "ActiveTable":
+        return cls(blob, ptable.table_crc(blob), ptable.unpack(dictionary, blob))
+
+
+@dataclass
+class UploadRecord:
+    """One verified upload (what the history and the log keep)."""
+
+    time: float                     # s since the epoch, when it was verified
+    source: str                     # design file, "edited in the GUI", "rollback to ..."
+    version: int                    # table_version given at PARAM_BEGIN
+    crc: int
+    previous_crc: int
+    activated_tick: int
+    device: str = ""
+    notes: list[str] = field(default_factory=list)
+
+
+def entry_differences(dictionary: Dictionary, a: Mapping[str, Any], b: Mapping[str, Any]) -> list[str]:
+    """Names of the entries whose values differ (bit for bit: NaN equals NaN, -0 differs
+    from +0 only where the wire bytes differ, which pack() decides)."""
+    out = []
+    for p in dictionary.parameters:
+        if p.name not in a or p.name not in b:
+            out.append(p.name)
+            continue
+        x = np.asarray(a[p.name], dtype=p.dtype)
+        y = np.asarray(b[p.name], dtype=p.dtype)
+        if x.shape != y.shape or x.tobytes() != y.tobytes():
+            out.append(p.name)
+    return out
+
+
+class ParameterHistory:
+    """Verified uploads kept on disk, so a rollback works from a new program run too.
+
+    folder/history.jsonl holds one UploadRecord per line; folder/tables/<crc>.bin the
+    table bytes (content-addressed: a table uploaded twice is stored once)."""
+
+    def __init__(self, folder: str | Path):
+        self.folder = Path(folder)
+
+    @staticmethod
+    def default_folder() -> Path:
+        base = os.environ.get("XDG_DATA_HOME") or str(Path.home() / ".local" / "share")
+        return Path(base) / "groundstation" / "parameter_history"
+
+    def add(self, record: UploadRecord, blob: bytes, previous_blob: bytes) -> None:
+        tables = self.folder / "tables"
+        tables.mkdir(parents=True, exist_ok=True)
+        for b in (blob, previous_blob):
+            path = tables / f"{ptable.table_crc(b):08x}.bin"
+            if not path.exists():
+                tmp = path.with_suffix(".tmp")
+                tmp.write_bytes(b)
+                os.replace(tmp, path)          # never a half-written table under its CRC's name
+        with open(self.folder / "history.jsonl", "a", encoding="utf-8") as f:
+            f.write(json.dumps(asdict(record)) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+
+    def records(self) -> list[UploadRecord]:
+        path = self.folder / "history.jsonl"
+        if not path.exists():
+            return []
+        out = []
+        for line in path.read_text(encoding="utf-8").splitlines():
+            try:
+                out.append(UploadRecord(**json.loads(line)))
+            except (ValueError, TypeError):
+                continue                       # a line cut short by a crash: skip it
+        return out
+
+    def table(self, crc: int) -> bytes:
+        path = self.folder / "tables" / f"{crc:08x}.bin"
+        try:
+            blob = path.read_bytes()
+        except OSError as exc:
+            raise UploadError(f"{path}: stored table missing ({exc.strerror})") from None
+        if ptable.table_crc(blob) != crc:
+            raise UploadError(f"{path}: stored table is damaged (CRC {ptable.table_crc(blob):08x}, "
+                              f"expected {crc:08x})")
+        return blob
+
+
+class MemoryHistory:
+    """The same as ParameterHistory, for this program run only (no folder given)."""
+
+    def __init__(self) -> None:
+        self._records: list[UploadRecord] = []
+        self._tables: dict[int, bytes] = {}
+
+    def add(self, record: UploadRecord, blob: bytes, previous_blob: bytes) -> None:
+        for b in (blob, previous_blob):
+            self._tables[ptable.table_crc(b)] = b
+        self._records.append(record)
+
+    def records(self) -> list[UploadRecord]:
+        return list(self._records)
+
+    def table(self, crc: int) -> bytes:
+        try:
+            return self._tables[crc]
+        except KeyError:
+            raise UploadError(f"no table with CRC {crc:08x} was uploaded in this run") from None
+
+
+ROLLBACK_SOURCE = "rollback"
+
+
+class ParameterLoader:
+    """Uploads, reads back and rolls back parameter tables through a DeviceClient."""
+
+    def __init__(self, client, dictionary: Dictionary, history: ParameterHistory | None = None,
+                 journal: Callable[[str, dict, bytes], None] | None = None):
+        self.client = client
+        self.d = dictionary
+        self.history = history if history is not None else MemoryHistory()
+        #: called with ("parameter_table", record, table bytes) after each verified upload
+        self.journal = journal
+        self.last_uploaded: UploadRecord | None = None
+        self.write_block = dictionary.max_payload - 10  # token, opcode, offset
+        count = next(i for i in dictionary.command("PARAM_READ").args if i.name == "count")
+        self.read_block = int(count.value_range[1]) if count.value_range else 512
+
+    # ------------------------------------------------------------------ reading
+    def read_active(self, progress: Callable[[str, float], None] | None = None) -> ActiveTable:
+        size = ptable.table_size(self.d)
+        parts = []
+        for off in range(0, size, self.read_block):
+            n = min(self.read_block, size - off)
+            reply = self.client.command("PARAM_READ", offset=off, count=n).reply
+            data = bytes(reply["data"])
+            if reply["offset"] != off or len(data) != n:
+                raise UploadError(f"PARAM_READ at {off}: the device sent {len(data)} bytes at "
+                                  f"offset {reply['offset']}, not {n} at {off}")
+            parts.append(data)
+            if progress:
+                progress("read back", (off + n) / size)
+        return ActiveTable.from_blob(self.d, b"".join(parts))
+
+    # ------------------------------------------------------------------ uploading
+    def upload(self, values: Mapping[str, Any], source: str = "",
+               progress: Callable[[str, float], None] | None = None) -> UploadRecord:
+        """Send a complete table and verify it; raise UploadError (or ParameterError
+        for a table refused here) on anything short of verified."""
+        problems = ptable.problems(self.d, values)
+        if problems:
+            raise ptable.ParameterError("table refused before sending: " + "; ".join(problems))
+        blob = ptable.pack(self.d, values)
+        return self._upload_blob(blob, source, progress)
+
+    def _upload_blob(self, blob: bytes, source: str,
+                     progress: Callable[[str, float], None] | None) -> UploadRecord:
+        crc = ptable.table_crc(blob)
+        waiter = _HousekeepingWaiter(self.client, crc)
+        try:
+            previous = self.read_active()
+            # the new table's version follows the active one's (HOUSEKEEPING reports it)
+            version = ((waiter.wait_any(HOUSEKEEPING_WAIT_S) or 0) + 1) & 0xFFFF or 1
+            self._command("PARAM_BEGIN", table_version=version, table_length=len(blob))
+            for off in range(0, len(blob), self.write_block):
+                self._command("PARAM_WRITE", offset=off, data=blob[off:off + self.write_block])
+                if progress:
+                    progress("upload", min(1.0, (off + self.write_block) / len(blob)))
+            reply = self._command("PARAM_COMMIT", table_crc=crc).reply
+            if reply["table_crc"] != crc:
+                raise VerifyError(f"PARAM_COMMIT: the device activated a table with CRC "
+                                  f"{reply['table_crc']:08x}, not the {crc:08x} sent")
+            back = self.read_active(progress)
+            if back.blob != blob:
+                sent = ptable.unpack(self.d, blob)
+                differ = entry_differences(self.d, sent, back.values)
+                raise VerifyError("read-back differs from the table sent in: "
+                                  + ", ".join(differ or ["(padding bytes)"]))
+            hk_crc = waiter.wait(HOUSEKEEPING_WAIT_S)
+            if hk_crc != crc:
+                raise VerifyError(f"HOUSEKEEPING reports active table CRC "
+                                  f"{'none' if hk_crc is None else format(hk_crc, '08x')} "
+                                  f"{HOUSEKEEPING_WAIT_S:g} s after the commit, expected {crc:08x}")
+        finally:
+            waiter.close()
+        record = UploadRecord(time=time.time(), source=source, version=version, crc=crc,
+                              previous_crc=previous.crc, activated_tick=int(reply["tick"]),
+                              device=str(self.client.device_info.get("description", "")))
+        self.last_uploaded = record
+        self.history.add(record, blob, previous.blob)
+        if self.journal is not None:
+            self.journal("parameter_table", asdict(record), blob)
+        return record
+
+    def rollback(self, progress: Callable[[str, float], None] | None = None) -> UploadRecord:
+        """Re-activate the table that was active before the upload that made the active
+        one.  Rollbacks are skipped when looking for that upload, so a second rollback
+        goes one table further back instead of undoing the first."""
+        active = self.read_active()
+        target = None
+        for rec in reversed(self.history.records()):
+            if rec.crc == active.crc and not rec.source.startswith(ROLLBACK_SOURCE):
+                target = rec.previous_crc
+                break
+        if target is None:
+            raise UploadError(f"nothing to roll back to: the device's active table "
+                              f"(CRC {active.crc:08x}) was not uploaded from here")
+        if target == active.crc:
+            raise UploadError(f"the previous table is the active one (CRC {active.crc:08x})")
+        blob = self.history.table(target)
+        return self._upload_blob(blob, f"{ROLLBACK_SOURCE} from {active.crc:08x} to {target:08x}",
+                                 progress)
+
+    # ------------------------------------------------------------------ helpers
+    def _command(self, name: str, **args: Any):
+        try:
+            return self.client.command(name, **args)
+        except (CommandRejected, CommandFailed) as exc:
+            reason = getattr(exc, "reason", "")
+            advice = _REASON_ADVICE.get(reason, "")
+            raise UploadError(f"{exc}" + (f": {advice}" if advice else "")) from exc
+
+
+class _HousekeepingWaiter:
+    """Watches HOUSEKEEPING for the active-table CRC from before the commit on, so a
+    report that arrives between the commit and the read-back is not missed."""
+
+    def __init__(self, client, crc: int):
+        self.client = client
+        self.crc = crc
+        self.latest: int | None = None
+        self.latest_version: int | None = None
+        self._seen = threading.Event()
+        self._any = threading.Event()
+        client.subscribe(self)
+
+    def __call__(self, block) -> None:
+        if block.name != "HOUSEKEEPING" or not len(block):
+            return
+        self.latest = int(block["param_table_crc"][-1])
+        self.latest_version = int(block["param_table_version"][-1])
+        self._any.set()
+        if self.latest == self.crc:
+            self._seen.set()
+
+    def wait_any(self, timeout: float) -> int | None:
+        """The active table's version from the next HOUSEKEEPING (None if none came)."""
+        self._any.wait(timeout)
+        return self.latest_version
+
+    def wait(self, timeout: float) -> int | None:
+        self._seen.wait(timeout)
+        return self.latest
+
+    def close(self) -> None:
+        unsubscribe = getattr(self.client, "unsubscribe", None)
+        if unsubscribe is not None:
+            unsubscribe(self)
+
