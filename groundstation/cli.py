@@ -5,6 +5,7 @@
     groundstation monitor --device ADDR    connect and print live link statistics
     groundstation protocol info|check      the protocol dictionary
     groundstation record --folder logs     record a session to HDF5 (see cli_logs.py)
+    groundstation params validate|upload|show|rollback   controller designs (see cli_params.py)
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ import sys
 import threading
 import time
 
-from . import __version__, cli_logs
+from . import __version__, cli_logs, cli_params
 from .dictionary import load_dictionary
 from .errors import GroundStationError
 
@@ -193,6 +194,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--replay", default=None, help="open this log in replay instead")
     s.set_defaults(func=_cmd_gui)
     cli_logs.add_parsers(sub)
+    cli_params.add_parsers(sub)
     return p
 
 

@@ -25,6 +25,13 @@ def wait_for(predicate, timeout: float = 5.0, interval: float = 0.005):
     raise AssertionError(f"condition not met within {timeout} s")
 
 
+@pytest.fixture(autouse=True)
+def _private_data_home(tmp_path_factory, monkeypatch):
+    """Parameter history and other per-user files go to a temporary folder, never to the
+    home directory of whoever runs the tests."""
+    monkeypatch.setenv("XDG_DATA_HOME", str(tmp_path_factory.mktemp("data_home")))
+
+
 @pytest.fixture(scope="session")
 def dictionary():
     return load_dictionary()

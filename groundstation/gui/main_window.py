@@ -12,6 +12,7 @@ from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QMe
 from ..sim.testbed import TESTBEDS_DIR
 from .channel_tree import ChannelTree
 from .charts import StripChartPanel
+from .params_panel import ParameterPanel
 from .panels import CommandPanel, ConnectionBar, EventLog, RecordingPanel, ReplayBar, StatusPanel
 from .session import Session
 from .spectrum import SpectrumView
@@ -54,19 +55,22 @@ class MainWindow(QMainWindow):
         self.recording = RecordingPanel(session)
         self.events = EventLog(session)
         self.spectrum = SpectrumView(session.store, d)
+        self.parameters = ParameterPanel(session, d)
         self.docks = {}
         for name, widget, area in (("Channels", self.tree, Qt.DockWidgetArea.LeftDockWidgetArea),
                                    ("Commands", self.commands, Qt.DockWidgetArea.RightDockWidgetArea),
                                    ("Status and limits", self.status_panel, Qt.DockWidgetArea.RightDockWidgetArea),
                                    ("Recording", self.recording, Qt.DockWidgetArea.LeftDockWidgetArea),
                                    ("Events", self.events, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Spectrum", self.spectrum, Qt.DockWidgetArea.BottomDockWidgetArea)):
+                                   ("Spectrum", self.spectrum, Qt.DockWidgetArea.BottomDockWidgetArea),
+                                   ("Parameters", self.parameters, Qt.DockWidgetArea.BottomDockWidgetArea)):
             dock = QDockWidget(name)
             dock.setObjectName(name.lower().replace(" ", "_"))
             dock.setWidget(widget)
             self.addDockWidget(area, dock)
             self.docks[name] = dock
         self.tabifyDockWidget(self.docks["Events"], self.docks["Spectrum"])
+        self.tabifyDockWidget(self.docks["Events"], self.docks["Parameters"])
         self.docks["Events"].raise_()
 
         self.link_label = QLabel("not connected")
@@ -103,6 +107,11 @@ class MainWindow(QMainWindow):
         action(m, "&ABORT", self.abort)
         action(m, "&Arm", lambda: self.commands.send("ARM"))
         action(m, "Dis&arm", lambda: self.commands.send("DISARM"), "Ctrl+D")
+        m.addSeparator()
+        action(m, "&Load controller design...", self._load_design, "Ctrl+L")
+        action(m, "&Upload parameter table...", self.parameters.upload, "Ctrl+U")
+        action(m, "Read &back parameter table", self.session.params_read)
+        action(m, "Roll back parameter table...", self.parameters.rollback)
         m = self.menuBar().addMenu("&View")
         action(m, "&Pause charts", lambda: self.charts.set_paused(not self.charts.paused), "Ctrl+Space")
         for dock in self.docks.values():
@@ -114,6 +123,11 @@ class MainWindow(QMainWindow):
             "Esc aborts: both motors to zero, drives off, mode IDLE."))
 
     # ------------------------------------------------------------------ actions
+    def _load_design(self) -> None:
+        self.docks["Parameters"].show()
+        self.docks["Parameters"].raise_()
+        self.parameters.load_design_dialog()
+
     def abort(self) -> None:
         self.session.abort()
         self.statusBar().showMessage("ABORT sent", 3000)

@@ -22,6 +22,7 @@ from ..link import DeviceClient, open_client
 from ..logs import Recorder, ReplaySource
 from ..logs.live import attach_recorder
 from ..monitor import LimitMonitor
+from ..params.upload import ParameterHistory, ParameterLoader
 from ..sim.process import SimulatorProcess
 from ..stream import TelemetryStore
 
@@ -36,10 +37,15 @@ class Session(QObject):
     sig_command = Signal(str, str, str, str)     # command, sequence (u32, as text), stage, reason
     sig_recording = Signal(str, str)             # state ("recording", "stopped", "failed"), text
     sig_source = Signal(str, str)                # "live"/"replay"/"none", description
+    #: parameter table work: ("active", ActiveTable) after a read, ("uploaded", UploadRecord),
+    #: ("progress", (step, fraction)), ("failed", message)
+    sig_params = Signal(str, object)
 
-    def __init__(self, dictionary: Dictionary, store_seconds: float = 600.0, parent=None):
+    def __init__(self, dictionary: Dictionary, store_seconds: float = 600.0, parent=None,
+                 param_history: str | Path | None = None):
         super().__init__(parent)
         self.d = dictionary
+        self.param_history = ParameterHistory(param_history or ParameterHistory.default_folder())
         self.store = TelemetryStore(dictionary, store_seconds)
         self.store.on_restart = self._on_device_restart
         self.limits = LimitMonitor(dictionary)
@@ -223,6 +229,63 @@ class Session(QObject):
             self.sig_event.emit("WARNING", "command", "ABORT: no device connected")
             return
         self.command("ABORT")
+
+    # ------------------------------------------------------------------ parameter table
+    def _param_loader(self) -> ParameterLoader | None:
+        client = self.client
+        if client is None:
+            self.sig_params.emit("failed", "not connected")
+            return None
+        return ParameterLoader(client, self.d, self.param_history, journal=self._journal)
+
+    def _journal(self, kind: str, record: dict, blob: bytes) -> None:
+        rec = self.recorder
+        if rec is not None:
+            rec.record(kind, record, blob)
+
+    def _param_work(self, name: str, work) -> None:
+        loader = self._param_loader()
+        if loader is None:
+            return
+
+        def run():
+            try:
+                work(loader)
+            except GroundStationError as exc:
+                self.sig_params.emit("failed", str(exc))
+                self.sig_event.emit("ERROR", "parameters", str(exc))
+        self._worker(run, f"gs-params-{name}")
+
+    def params_read(self) -> None:
+        """Read the device's active table (worker thread); arrives as sig_params 'active'."""
+        self._param_work("read", lambda loader: self.sig_params.emit(
+            "active", loader.read_active(self._param_progress)))
+
+    def params_upload(self, values: dict, source: str) -> None:
+        """Upload and verify a table (worker thread): 'uploaded', then 'active'."""
+        def work(loader):
+            record = loader.upload(values, source, progress=self._param_progress)
+            self._uploaded(record)
+            self.sig_params.emit("active", loader.read_active())
+        self._param_work("upload", work)
+
+    def params_rollback(self) -> None:
+        """Re-activate the table that was active before the last upload."""
+        def work(loader):
+            record = loader.rollback(progress=self._param_progress)
+            self._uploaded(record)
+            self.sig_params.emit("active", loader.read_active())
+        self._param_work("rollback", work)
+
+    def _uploaded(self, record) -> None:
+        self.last_uploaded_crc = record.crc
+        self.sig_params.emit("uploaded", record)
+        self.sig_event.emit("INFO", "parameters",
+                            f"parameter table {record.crc:08x} (v{record.version}) verified on the "
+                            f"device: {record.source}")
+
+    def _param_progress(self, step: str, fraction: float) -> None:
+        self.sig_params.emit("progress", (step, fraction))
 
     # ------------------------------------------------------------------ recording
     def start_recording(self, folder: str, test_name: str, notes: str = "") -> Path | None:

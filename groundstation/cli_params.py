@@ -1,0 +1,282 @@
+"""`groundstation params ...`: controller designs and the parameter table.
+
+    groundstation params validate FILE    check a design file before anything is sent
+    groundstation params upload FILE [--device sim|ADDRESS]
+                                          validate, upload, verify (read-back + HOUSEKEEPING CRC)
+    groundstation params show [--device ...] [--against FILE] [--differences]
+                                          the device's table beside the design and the last upload
+    groundstation params rollback [--device ...]
+                                          re-activate the table active before the last upload
+
+Each action is one `_add_<action>(actions)` function below, called from `add_parsers`;
+an action that talks to the device adds its own the same way.
+Exit codes: 0 accepted, 1 refused (the design is readable but must not be sent),
+2 the file cannot be read or is malformed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .errors import GroundStationError
+
+EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
+
+
+def add_parsers(sub) -> argparse._SubParsersAction:
+    """Add `params` to the CLI's subcommands; returns its own subparsers for more actions."""
+    p = sub.add_parser("params", help="controller designs and the parameter table")
+    actions = p.add_subparsers(dest="params_action", required=True, metavar="ACTION")
+    _add_validate(actions)
+    _add_upload(actions)
+    _add_show(actions)
+    _add_rollback(actions)
+    return actions
+
+
+def _add_validate(actions) -> None:
+    s = actions.add_parser("validate", help="check a controller design file (no device needed)",
+                           description="Load a design, discretise it as it would be uploaded, "
+                                       "and check it in its loop with the testbed's model. "
+                                       "Exit 0: may be sent; 1: refused; 2: unreadable file.")
+    s.add_argument("file", help="design file, e.g. profiles/controllers/relative_design2.toml")
+    s.set_defaults(func=_cmd_validate)
+
+
+def _cmd_validate(args) -> int:
+    from .dictionary import load_dictionary
+    from .params.design import load_design, table_values
+    from .params.loop import validate
+
+    try:
+        design = load_design(args.file)
+        dictionary = load_dictionary(args.protocol_dir)
+        report = validate(design, table_values(design, dictionary=dictionary), dictionary)
+    except GroundStationError as exc:
+        text = str(exc)
+        print(f"error: {text if text.startswith(str(args.file)) else f'{args.file}: {text}'}",
+              file=sys.stderr)
+        return EXIT_UNREADABLE
+    for line in report_lines(design, report):
+        print(line)
+    return EXIT_OK if report.ok else EXIT_REFUSED
+
+
+def _device_options(s) -> None:
+    s.add_argument("--device", default="sim",
+                   help="sim (a simulated testbed started for this command) | tcp://HOST:PORT | "
+                        "serial://PORT?baud=N")
+    s.add_argument("--testbed", default=None,
+                   help="testbed file for --device sim (default: the design's testbed)")
+    s.add_argument("--history", default=None,
+                   help="folder of verified uploads, for rollback (default: "
+                        "$XDG_DATA_HOME/groundstation/parameter_history)")
+    s.add_argument("--take-over", action="store_true", help="end another host's session")
+
+
+def _add_upload(actions) -> None:
+    s = actions.add_parser("upload", help="validate a design, upload it and verify it on the device",
+                           description="The design's table is built over the device's active one, "
+                                       "validated, uploaded in blocks, committed with its CRC, read "
+                                       "back entry by entry and confirmed by HOUSEKEEPING. Exit 0: "
+                                       "verified; 1: refused or failed (the previous table stays "
+                                       "active); 2: unreadable file.")
+    s.add_argument("file", help="design file, e.g. profiles/controllers/relative_design2.toml")
+    _device_options(s)
+    s.set_defaults(func=_cmd_upload)
+
+
+def _add_show(actions) -> None:
+    s = actions.add_parser("show", help="the device's active parameter table",
+                           description="Three columns: the design (--against), the last table "
+                                       "uploaded from this computer, and the device's.")
+    s.add_argument("--against", default=None, help="a design file to compare with")
+    s.add_argument("--differences", action="store_true", help="only the entries that differ")
+    _device_options(s)
+    s.set_defaults(func=_cmd_show)
+
+
+def _add_rollback(actions) -> None:
+    s = actions.add_parser("rollback", help="re-activate the table active before the last upload")
+    _device_options(s)
+    s.set_defaults(func=_cmd_rollback)
+
+
+class _Device:
+    """--device as a connected client (and the simulator child it started, if any)."""
+
+    def __init__(self, args, testbed: str | None = None):
+        from .link import open_client
+        from .sim.process import device_address
+
+        self.dictionary = load_dictionary_for(args)
+        self.address, self.sim = device_address(args.device, args.testbed or testbed)
+        try:
+            self.client = open_client(self.dictionary, self.address)
+            self.client.connect(take_over=args.take_over)
+        except BaseException:
+            self.close()
+            raise
+
+    def close(self) -> None:
+        client = getattr(self, "client", None)
+        if client is not None:
+            client.close()
+        if self.sim is not None:
+            self.sim.stop()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def load_dictionary_for(args):
+    from .dictionary import load_dictionary
+    return load_dictionary(args.protocol_dir)
+
+
+def _loader(device: _Device, args):
+    from .params.upload import ParameterHistory, ParameterLoader
+    history = ParameterHistory(args.history or ParameterHistory.default_folder())
+    return ParameterLoader(device.client, device.dictionary, history)
+
+
+def _progress(step: str, fraction: float) -> None:
+    if sys.stderr.isatty():                  # a live percentage on a terminal, one line in a log
+        print(f"\r{step}: {100 * fraction:5.1f} %", end="", file=sys.stderr, flush=True)
+        if fraction >= 1.0:
+            print("", file=sys.stderr, flush=True)
+    elif fraction >= 1.0:
+        print(f"{step}: done", file=sys.stderr, flush=True)
+
+
+def _fail(text: str, code: int = EXIT_REFUSED) -> int:
+    print(f"error: {text}", file=sys.stderr)
+    return code
+
+
+def _cmd_upload(args) -> int:
+    from .params.design import load_design, table_values
+    from .params.loop import validate
+
+    try:
+        design = load_design(args.file)
+    except GroundStationError as exc:
+        text = str(exc)
+        return _fail(text if text.startswith(str(args.file)) else f"{args.file}: {text}", EXIT_UNREADABLE)
+    dictionary = load_dictionary_for(args)
+    # refuse before touching the device: the design over the defaults must already pass
+    first = validate(design, table_values(design, dictionary=dictionary), dictionary)
+    if not first.ok:
+        for line in report_lines(design, first):
+            print(line)
+        return _fail(f"{args.file}: refused, nothing was sent")
+    try:
+        with _Device(args, testbed=str(design.testbed.path)) as device:
+            loader = _loader(device, args)
+            active = loader.read_active()
+            values = table_values(design, base=active.values, dictionary=dictionary)
+            report = validate(design, values, dictionary)      # the very table that is sent
+            for line in report_lines(design, report):
+                print(line)
+            if not report.ok:
+                return _fail(f"{args.file}: refused, nothing was sent")
+            record = loader.upload(values, source=str(args.file), progress=_progress)
+            print(f"verified: table {record.crc:08x} v{record.version} active since tick "
+                  f"{record.activated_tick} (previous {record.previous_crc:08x}); read back bit for "
+                  f"bit, HOUSEKEEPING agrees")
+    except GroundStationError as exc:
+        return _fail(str(exc))
+    return EXIT_OK
+
+
+def _cmd_show(args) -> int:
+    from .params.compare import format_rows, three_way
+    from .params.design import load_design, table_values
+    from .params import table as ptable
+
+    design_values = None
+    testbed = None
+    try:
+        if args.against:
+            design = load_design(args.against)
+            testbed = str(design.testbed.path)
+    except GroundStationError as exc:
+        return _fail(str(exc), EXIT_UNREADABLE)
+    try:
+        with _Device(args, testbed=testbed) as device:
+            loader = _loader(device, args)
+            active = loader.read_active()
+            if args.against:
+                design_values = table_values(design, base=active.values, dictionary=device.dictionary)
+            uploaded = None
+            records = loader.history.records()
+            if records:
+                uploaded = ptable.unpack(device.dictionary, loader.history.table(records[-1].crc))
+            rows = three_way(device.dictionary, {"design": design_values, "uploaded": uploaded,
+                                                 "device": active.values})
+            print(f"device {device.address}: active table {active.crc:08x}")
+            if records:
+                r = records[-1]
+                print(f"last uploaded from here: {r.crc:08x} v{r.version} from {r.source}")
+            print(format_rows(rows, only_differences=args.differences))
+            differ = [r.name for r in rows if r.status == "differs"]
+            if differ:
+                print(f"{len(differ)} entr{'y differs' if len(differ) == 1 else 'ies differ'}: "
+                      + ", ".join(differ))
+    except GroundStationError as exc:
+        return _fail(str(exc))
+    return EXIT_OK
+
+
+def _cmd_rollback(args) -> int:
+    try:
+        with _Device(args) as device:
+            record = _loader(device, args).rollback(progress=_progress)
+            print(f"rolled back: table {record.crc:08x} active again (was {record.previous_crc:08x}), "
+                  f"verified")
+    except GroundStationError as exc:
+        return _fail(str(exc))
+    return EXIT_OK
+
+
+def report_lines(design, report) -> list[str]:
+    """The validation report as text (also what a log or a dialog can show)."""
+    tb = design.testbed
+    out = [f"design:   {design.name} ({design.path})",
+           f"mode:     {design.mode} on {tb.name} ({tb.path.name})"]
+    for note in design.notes:
+        out.append(f"note:     {note}")
+    for name, tf in design.cascades.items():
+        integ = f", {report.integrators[name]} integrator(s)" if report.integrators.get(name) else ""
+        rows = report.sections.get(name)
+        out.append(f"{name}:       order {tf.order}{integ}, {rows} section(s): {tf.text()}")
+    m = report.match
+    if m is not None:
+        prewarp = f", pre-warped at {m.prewarp_hz:g} Hz" if m.prewarp_hz else ""
+        out.append(f"discrete: bilinear at {m.rate_hz:g} Hz{prewarp} (frequency warp "
+                   f"{m.warp_pct:.2f} % at {m.band_hz:g} Hz); worst below {m.band_hz:g} Hz:")
+        for name, r in {**m.cascades, **m.paths}.items():
+            out.append(f"          {name:<6} {r.text()}")
+        if m.closed_loop is not None:
+            out.append(f"          closed loop (sensitivity) {m.closed_loop.text()}")
+    if report.margins is not None:
+        out.append(f"margins:  loop broken at e: {report.margins.text()}")
+    if report.inner_margins is not None:
+        out.append(f"          rate loop alone: {report.inner_margins.text()}")
+    if report.outer_margins is not None:
+        out.append(f"          position loop (rate loop closed): {report.outer_margins.text()}")
+    if report.max_pole_radius is not None:
+        out.append(f"poles:    closed-loop max |z| = {report.max_pole_radius:.6f}; controller "
+                   f"max |z| = {report.controller_pole_radius:.6f} (integrators at z = 1 aside)")
+    for w in report.warnings:
+        out.append(f"warning:  {w}")
+    if report.ok:
+        out.append("OK: the table may be sent")
+    else:
+        out.append(f"REFUSED: {len(report.problems)} problem(s)")
+        out += [f"problem:  {p}" for p in report.problems]
+    return out
