@@ -6,6 +6,7 @@
     groundstation protocol info|check      the protocol dictionary
     groundstation record --folder logs     record a session to HDF5 (see cli_logs.py)
     groundstation params validate|upload|show|rollback   controller designs (see cli_params.py)
+    groundstation fg list|identify|set|upload|off   the base-motion generator (cli_fg.py)
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import sys
 import threading
 import time
 
-from . import __version__, cli_logs, cli_params
+from . import __version__, cli_fg, cli_logs, cli_params
 from .dictionary import load_dictionary
 from .errors import GroundStationError
 
@@ -56,6 +57,18 @@ def _cmd_sim(args) -> int:
                           frames_per_datagram=args.frames_per_datagram, testbed=testbed,
                           speed=args.speed)
     dev.start()
+    fg = None
+    if args.fg_port is not None:          # the base-stage function generator (SCPI on TCP)
+        from .sim.process import FG_ANNOUNCE
+        from .sim.scpi_fg import attach_generator
+
+        try:
+            fg = attach_generator(dev, host=args.host, port=args.fg_port)
+        except BaseException:
+            dev.stop()
+            raise
+        if args.announce:                 # before LISTENING, which ends the parent's wait
+            print(f"{FG_ANNOUNCE}{fg.resource}", flush=True)
     if not args.announce:
         print(f"testbed: {testbed.name} ({testbed.path}), friction model "
               f"{testbed.friction['model']}, seed {args.seed}", flush=True)
@@ -63,6 +76,8 @@ def _cmd_sim(args) -> int:
         print(f"LISTENING tcp://{dev.host}:{dev.tcp_port}", flush=True)
     else:
         print(f"simulated testbed on tcp://{dev.host}:{dev.tcp_port} (Ctrl-C to stop)", flush=True)
+        if fg is not None:
+            print(f"function generator on {fg.resource} (VISA resource for pyvisa-py)", flush=True)
     if args.pty:
         from .sim.pty import PtyMasterStream
 
@@ -76,6 +91,8 @@ def _cmd_sim(args) -> int:
             if parent is not None and os.getppid() != parent:
                 break
     finally:
+        if fg is not None:
+            fg.stop()
         dev.stop()
     return 0
 
@@ -171,6 +188,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="realtime pacing: control periods per 1/1200 s of wall time "
                         "(10: a 10x burst of 12 000 frames/s; default 1)")
     s.add_argument("--frames-per-datagram", type=int, default=1)
+    s.add_argument("--fg-port", type=int, default=None,
+                   help="also serve the simulated function generator (SCPI on TCP) on this "
+                        "port, 0: any free port (default: no generator)")
     s.add_argument("--pty", action="store_true",
                    help="also serve a serial link on a pseudo-terminal (prints its name)")
     s.add_argument("--announce", action="store_true", help=argparse.SUPPRESS)
@@ -195,6 +215,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_gui)
     cli_logs.add_parsers(sub)
     cli_params.add_parsers(sub)
+    cli_fg.add_parsers(sub)
     return p
 
 

@@ -1,9 +1,10 @@
 """The simulated testbed as a child process (what `make run` and the GUI start).
 
-The child prints one line `LISTENING tcp://HOST:PORT` once its command port is open;
-the parent reads it (with a timeout) to learn the port, and terminates the child when
-done.  A separate process keeps the simulator's 1200 Hz loop off the ground station's
-interpreter lock, as a real rig would be.
+The child prints one line `LISTENING tcp://HOST:PORT` once its command port is open
+(preceded, with --fg-port, by `FG_LISTENING TCPIP0::HOST::PORT::SOCKET` for the simulated
+function generator); the parent reads them (with a timeout) to learn the ports, and
+terminates the child when done.  A separate process keeps the simulator's 1200 Hz loop
+off the ground station's interpreter lock, as a real rig would be.
 """
 
 from __future__ import annotations
@@ -17,20 +18,25 @@ import time
 from ..errors import LinkError
 
 ANNOUNCE = "LISTENING "
+FG_ANNOUNCE = "FG_LISTENING "       # the function generator's line (sim --fg-port)
 
 
 class SimulatorProcess:
     def __init__(self, *, host: str = "127.0.0.1", tcp_port: int = 0, pacing: str = "realtime",
                  seed: int = 0, testbed: str | None = None, start_timeout: float = 60.0,
-                 speed: float = 1.0):
+                 speed: float = 1.0, fg_port: int | None = None):
         self.args = [sys.executable, "-m", "groundstation", "sim", "--host", host,
                      "--tcp-port", str(tcp_port), "--pacing", pacing, "--seed", str(seed),
                      "--announce"] + (["--testbed", str(testbed)] if testbed else [])
         if speed != 1.0:                    # realtime pacing at `speed` x 1200 periods/s
             self.args += ["--speed", repr(float(speed))]
+        if fg_port is not None:             # serve the function generator too (0: any port)
+            self.args += ["--fg-port", str(fg_port)]
         self.start_timeout = start_timeout
         self.proc: subprocess.Popen | None = None
         self.address: str = ""
+        #: the simulated generator's VISA resource (TCPIP0::HOST::PORT::SOCKET), if served
+        self.fg_resource: str | None = None
 
     def start(self) -> str:
         self.proc = subprocess.Popen(self.args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
@@ -41,6 +47,10 @@ class SimulatorProcess:
             ready, _, _ = select.select([self.proc.stdout], [], [], 0.1)
             if ready:
                 line = self.proc.stdout.readline()
+                # announced just before LISTENING: read on (LISTENING may be buffered already)
+                while line.startswith(FG_ANNOUNCE):
+                    self.fg_resource = line[len(FG_ANNOUNCE):].strip()
+                    line = self.proc.stdout.readline()
                 if line.startswith(ANNOUNCE):
                     self.address = line[len(ANNOUNCE):].strip()
                     return self.address

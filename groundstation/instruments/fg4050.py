@@ -1,0 +1,784 @@
+"""pyvisa driver for the B&K Precision 4050-series function generator (4053B).
+
+The generator drives the base stage (audio amplifier -> linear actuator -> rotary stage),
+so the driver is first of all a safety layer:
+
+* every setting is checked *before* it is sent, against the instrument's limits
+  (`spec4050`) and against the testbed's safety limits (`SafetyLimits`, from the testbed
+  file's [limits]); a refused setting raises `InstrumentLimitError` / `SafetyLimitError`
+  naming the value, the limit and where the limit comes from, and nothing is sent;
+* the full basic-wave state of a channel is sent in one `BSWV` command (read, modify,
+  check, send), so what was checked is exactly what the instrument gets, and amplitude
+  and offset are ordered so that no intermediate state leaves the envelope;
+* after every setting the standard event status (`*ESR?`) is read and, on an error bit,
+  the error queue (`SYST:ERR?`, where supported): an error raises `InstrumentError` with
+  the instrument's own text;
+* the outputs go off on `abort()`, on `close()`, when the driver is garbage-collected
+  and at interpreter exit, whatever happened before.  If the session is dead, the
+  resource is opened once more to switch them off; closing never raises.
+
+Backends: any pyvisa backend - "@py" (pyvisa-py, the default), "@ivi" (a vendor VISA
+where installed) or "file.yaml@sim" (pyvisa-sim, for tests).
+"""
+
+from __future__ import annotations
+
+import atexit
+import logging
+import math
+import re
+import threading
+import warnings
+import weakref
+from dataclasses import dataclass
+from typing import Iterable
+
+import numpy as np
+
+from ..errors import GroundStationError, LinkError
+from . import spec4050 as spec
+from .spec4050 import Identity
+
+log = logging.getLogger(__name__)
+
+DEFAULT_BACKEND = "@py"
+SHUTDOWN_TIMEOUT_MS = 1000          # closing must not hang on a dead link
+
+
+# ---------------------------------------------------------------------------------- errors
+class InstrumentError(GroundStationError):
+    """The instrument reported an error for a command (its own text is in the message)."""
+
+    def __init__(self, message: str, command: str = "", instrument_text: str = ""):
+        super().__init__(message)
+        self.command = command
+        self.instrument_text = instrument_text
+
+
+class InstrumentLinkError(LinkError):
+    """The instrument cannot be opened or stopped answering (VISA I/O error, timeout)."""
+
+
+class SettingRefusedError(GroundStationError):
+    """A setting was refused before anything was sent (value, limit and its source named)."""
+
+    def __init__(self, message: str, *, setting: str, value: float | str, limit: float | str,
+                 source: str):
+        super().__init__(message)
+        self.setting = setting
+        self.value = value
+        self.limit = limit
+        self.source = source
+
+
+class InstrumentLimitError(SettingRefusedError):
+    """Beyond what the 4050-series generator accepts (its specification)."""
+
+
+class SafetyLimitError(SettingRefusedError):
+    """Beyond what the testbed tolerates (the testbed file's [limits])."""
+
+
+# ---------------------------------------------------------------------------------- records
+@dataclass(frozen=True)
+class SafetyLimits:
+    """What the stage tolerates, in volts at the high-impedance amplifier input."""
+
+    max_amplitude_vpp: float
+    max_offset_v: float
+    source: str                  # where the numbers come from, quoted in every refusal
+
+    @classmethod
+    def from_testbed(cls, testbed) -> "SafetyLimits":
+        lim = testbed.limits
+        return cls(float(lim["fg_max_amplitude"]), float(lim["fg_max_offset"]),
+                   f"{testbed.path} [limits]")
+
+
+@dataclass(frozen=True)
+class BasicWave:
+    """One channel's basic-wave settings (None: not applicable to this waveform / unknown)."""
+
+    waveform: str
+    frequency_hz: float | None = None
+    amplitude_vpp: float | None = None
+    offset_v: float | None = None
+    phase_deg: float | None = None
+
+    @classmethod
+    def parse(cls, reply: str) -> "BasicWave":
+        try:
+            p = spec.pairs(spec.split_reply(reply, "BSWV"))
+            num = {k: spec.parse_number(p[k]) if k in p else None
+                   for k in ("FRQ", "AMP", "OFST", "PHSE")}
+            return cls(p["WVTP"].upper(), num["FRQ"], num["AMP"], num["OFST"], num["PHSE"])
+        except (KeyError, ValueError) as exc:
+            raise InstrumentError(f"cannot read the basic-wave reply {reply!r}: {exc}") from None
+
+    def command_pairs(self, previous: "BasicWave | None" = None) -> list[tuple[str, float | str]]:
+        """BSWV name,value pairs for this state; AMP before OFST when the amplitude
+        shrinks, after it when it grows, so every intermediate state stays in the envelope."""
+        values = {"FRQ": self.frequency_hz, "AMP": self.amplitude_vpp,
+                  "OFST": self.offset_v, "PHSE": self.phase_deg}
+        names = list(spec.WAVE_PARAMETERS[self.waveform])
+        grows = (previous is not None and previous.amplitude_vpp is not None
+                 and self.amplitude_vpp is not None
+                 and self.amplitude_vpp > previous.amplitude_vpp)
+        if grows and "AMP" in names and "OFST" in names:
+            names.remove("OFST")
+            names.insert(names.index("AMP"), "OFST")
+        return [("WVTP", self.waveform)] + [(n, values[n]) for n in names]
+
+
+@dataclass(frozen=True)
+class OutputState:
+    on: bool
+    load: str | None             # "HZ" or "50"; None when the instrument did not say
+
+    @classmethod
+    def parse(cls, reply: str) -> "OutputState":
+        fields = spec.split_reply(reply, "OUTP")
+        try:
+            state = fields[0].upper()
+            if state not in ("ON", "OFF"):
+                raise ValueError(f"state {fields[0]!r}")
+            extra = spec.pairs(fields[1:])
+            load = spec.normalise_load(extra["LOAD"]) if "LOAD" in extra else None
+        except (IndexError, ValueError) as exc:
+            raise InstrumentError(f"cannot read the output reply {reply!r}: {exc}") from None
+        return cls(state == "ON", load)
+
+
+@dataclass(frozen=True)
+class ArbSelection:
+    index: int | None            # built-in waveform index, None for a user waveform
+    name: str | None
+
+    @classmethod
+    def parse(cls, reply: str) -> "ArbSelection":
+        try:
+            p = spec.pairs(spec.split_reply(reply, "ARWV"))
+            index = int(p["INDEX"]) if "INDEX" in p else None
+        except ValueError as exc:
+            raise InstrumentError(f"cannot read the arbitrary-wave reply {reply!r}: {exc}") from None
+        return cls(index, p.get("NAME"))
+
+
+@dataclass(frozen=True)
+class ArbUpload:
+    """What `upload_arbitrary` sent: the waveform plays at `frequency_hz` = 1/period."""
+
+    channel: int
+    name: str
+    points: int
+    frequency_hz: float
+    amplitude_vpp: float
+    offset_v: float
+    codes: np.ndarray            # the int16 samples as sent
+
+
+@dataclass(frozen=True)
+class ResourceListing:
+    backend: str
+    resources: tuple[str, ...]
+    notes: tuple[str, ...]       # why a backend could not list, backend warnings
+
+
+# ---------------------------------------------------------------------------------- helpers
+def normalise_backend(backend: str | None) -> str:
+    """None -> '@py'; 'tests/fg.yaml' -> 'tests/fg.yaml@sim'."""
+    if not backend:
+        return DEFAULT_BACKEND
+    if backend.endswith((".yaml", ".yml")):
+        return backend + "@sim"
+    return backend
+
+
+def _resource_manager(backend: str):
+    import pyvisa
+
+    try:
+        return pyvisa.ResourceManager(backend)
+    except (OSError, ValueError, ImportError, pyvisa.errors.Error) as exc:
+        hint = (" (install a vendor VISA library, or use @py)" if backend == "@ivi"
+                else "")
+        raise InstrumentLinkError(f"VISA backend {backend!r} is not available: "
+                                  f"{_brief(exc)}{hint}") from None
+
+
+def _brief(exc: BaseException, limit: int = 300) -> str:
+    """One readable line from a backend's exception (pyvisa-sim puts whole tracebacks
+    into its messages): the last 'SomethingError: ...' line if there is one."""
+    lines = [ln.strip().strip("'\\n") for ln in str(exc).replace("\\n", "\n").splitlines()]
+    lines = [ln for ln in lines if ln]
+    if not lines:
+        return type(exc).__name__
+    errors = [ln for ln in lines if re.match(r"^[A-Za-z_.]*(Error|Exception): ", ln)]
+    text = errors[-1] if errors else lines[0]
+    return text if len(text) <= limit else text[:limit] + "..."
+
+
+def list_resources(backend: str | None = None, query: str = "?*::INSTR") -> ResourceListing:
+    """The VISA resources a backend can see; never raises.
+
+    pyvisa-py reports the limits of its discovery (no psutil, no zeroconf, no USB
+    library) as warnings: they are returned as notes for the user (and logged) instead
+    of being printed by the warnings machinery."""
+    backend = normalise_backend(backend)
+    notes: list[str] = []
+    found: tuple[str, ...] = ()
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            rm = _resource_manager(backend)
+        except InstrumentLinkError as exc:
+            notes.append(str(exc))
+        else:
+            try:
+                found = tuple(rm.list_resources(query))
+            except Exception as exc:      # any backend failure means "nothing found here"
+                notes.append(f"listing {query} on {backend} failed: {exc}")
+            finally:
+                try:
+                    rm.close()
+                except Exception as exc:
+                    log.debug("closing the resource manager: %s", exc)
+    for w in caught:
+        if issubclass(w.category, ResourceWarning):   # the backend's own leak, not news
+            log.debug("%s: %s", backend, w.message)
+        else:
+            notes.append(str(w.message))
+    for note in notes:
+        log.info("VISA listing: %s", note)
+    return ResourceListing(backend, found, tuple(notes))
+
+
+def _visa_errors() -> tuple[type[BaseException], ...]:
+    import pyvisa
+
+    # pyvisa-py lets socket errors through on a dropped TCP link
+    return (pyvisa.errors.VisaIOError, pyvisa.errors.InvalidSession, OSError, EOFError)
+
+
+# ---------------------------------------------------------------------------------- the link
+class _Link:
+    """The VISA session and what it takes to switch the outputs off at the end.
+
+    Holds no reference to the driver, so a weakref finaliser and an atexit handler can
+    use it after the driver is gone."""
+
+    def __init__(self, rm, resource_name: str, backend: str, timeout_ms: int):
+        self.rm = rm
+        self.resource_name = resource_name
+        self.backend = backend
+        self.timeout_ms = timeout_ms
+        self.lock = threading.RLock()
+        self.inst = None
+        self.closed = False
+        #: set once *IDN? named a 4050-series generator: only then does shutdown send
+        #: output commands (never to an instrument of unknown kind, nor to nothing)
+        self.is_generator = False
+
+    def open_session(self, timeout_ms: int | None = None):
+        inst = self.rm.open_resource(self.resource_name, read_termination="\n",
+                                     write_termination="\n",
+                                     timeout=timeout_ms or self.timeout_ms)
+        return inst
+
+    @staticmethod
+    def _off(inst) -> None:
+        """Both outputs off, confirmed by *OPC? (a write alone may vanish into a dead socket)."""
+        for ch in spec.CHANNELS:
+            inst.write(f"C{ch}:OUTP OFF")
+        if inst.query("*OPC?").strip() not in ("1", "+1"):
+            raise InstrumentError("the generator did not confirm switching its outputs off")
+
+    def outputs_off(self, *, reopen: bool = True) -> None:
+        """Switch both outputs off on the session or, if it is dead, on a new one."""
+        with self.lock:
+            first: Exception | None = None
+            if self.inst is not None:
+                try:
+                    self._off(self.inst)
+                    return
+                except Exception as exc:       # dead link: try again on a fresh session
+                    first = exc
+            if not reopen:
+                raise InstrumentLinkError(f"could not switch the outputs of {self.resource_name} "
+                                          f"off: {first}")
+            try:
+                inst = self.open_session(SHUTDOWN_TIMEOUT_MS)
+            except Exception as exc:
+                raise InstrumentLinkError(
+                    f"could not switch the outputs of {self.resource_name} off: {first or exc}; "
+                    f"re-opening failed: {exc}") from None
+            try:
+                self._off(inst)
+            except Exception as exc:
+                self._close_quietly(inst)
+                raise InstrumentLinkError(f"could not switch the outputs of {self.resource_name} "
+                                          f"off: {exc}") from None
+            self._close_quietly(self.inst)
+            inst.timeout = self.timeout_ms
+            self.inst = inst
+            log.warning("%s: the session had failed (%s); outputs switched off on a new one",
+                        self.resource_name, first)
+
+    @staticmethod
+    def _close_quietly(obj) -> None:
+        if obj is None:
+            return
+        try:
+            obj.close()
+        except Exception as exc:
+            log.debug("closing %r: %s", obj, exc)
+
+    def shutdown(self) -> None:
+        """Outputs off, session and resource manager closed.  Idempotent; never raises."""
+        with self.lock:
+            if self.closed:
+                return
+            self.closed = True
+            try:
+                atexit.unregister(self.shutdown)
+            except Exception:
+                pass
+            if self.is_generator:
+                try:
+                    if self.inst is not None:
+                        self.inst.timeout = SHUTDOWN_TIMEOUT_MS
+                    self.outputs_off()
+                except Exception as exc:
+                    log.error("%s: outputs may still be ON: %s", self.resource_name, exc)
+            self._close_quietly(self.inst)
+            self.inst = None
+            self._close_quietly(self.rm)
+
+
+# ---------------------------------------------------------------------------------- driver
+class FunctionGenerator4050:
+    """A 4050-series generator on a VISA resource; use `open_generator()` to make one.
+
+    All methods are safe to call from several threads (one transaction at a time)."""
+
+    def __init__(self, link: _Link, *, limits: SafetyLimits | None = None, check_model: bool = True):
+        self._link = link
+        self.limits = limits
+        self.resource_name = link.resource_name
+        self._finalizer = weakref.finalize(self, _Link.shutdown, link)
+        self._finalizer.atexit = False          # the atexit handler below runs first instead
+        # registered after pyvisa's own atexit handler for this resource manager, so it
+        # runs before it (atexit is last-in, first-out) while the session still works
+        atexit.register(link.shutdown)
+        self._error_query: str | None = "SYST:ERR?"
+        try:
+            with link.lock:
+                link.inst = link.open_session()
+                link.inst.write("*CLS")          # old errors are not ours
+            self.identity = self.identify()
+            if check_model and not self.identity.model.upper().startswith(spec.SERIES_PREFIX):
+                raise InstrumentError(f"{self.resource_name} is a {self.identity.maker} "
+                                      f"{self.identity.model}, not a 4050-series generator")
+            link.is_generator = True            # from now on, closing switches outputs off
+        except BaseException:
+            self._finalizer()
+            raise
+
+    # ------------------------------------------------------------------ lifecycle
+    def close(self) -> None:
+        """Outputs off, link closed.  Never raises (a dead link is logged)."""
+        self._finalizer()
+
+    @property
+    def closed(self) -> bool:
+        return self._link.closed
+
+    def __enter__(self) -> "FunctionGenerator4050":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def abort(self) -> None:
+        """Both outputs off now (re-opening the resource if the session died); raises
+        InstrumentLinkError only if the generator could not be reached at all."""
+        self._require_open()
+        self._link.outputs_off()
+
+    # ------------------------------------------------------------------ low level
+    def _require_open(self) -> None:
+        if self._link.closed:
+            raise InstrumentLinkError(f"{self.resource_name} is closed")
+
+    def _io_error(self, what: str, exc: BaseException) -> InstrumentLinkError:
+        return InstrumentLinkError(f"{self.resource_name}: {what} failed: "
+                                   f"{str(exc).strip() or type(exc).__name__}")
+
+    def query(self, command: str) -> str:
+        """Send a query and return the reply line (no error check: replies are data)."""
+        self._require_open()
+        with self._link.lock:
+            try:
+                return self._link.inst.query(command).strip()
+            except _visa_errors() as exc:
+                raise self._io_error(f"query {command!r}", exc) from None
+
+    def _write_checked(self, command: str, binary: np.ndarray | None = None) -> None:
+        self._require_open()
+        with self._link.lock:
+            try:
+                if binary is None:
+                    self._link.inst.write(command)
+                else:
+                    self._link.inst.write_binary_values(command, binary, datatype="h",
+                                                        is_big_endian=False, header_fmt="empty")
+            except _visa_errors() as exc:
+                raise self._io_error(f"sending {command!r}", exc) from None
+            self._check_errors(command)
+
+    def _check_errors(self, command: str) -> None:
+        """*ESR? after a setting; on an error bit, the error queue's text."""
+        reply = self.query("*ESR?")
+        try:
+            esr = int(float(reply))
+        except ValueError:
+            raise InstrumentError(f"{self.resource_name}: unexpected *ESR? reply {reply!r} "
+                                  f"after {command!r}") from None
+        bits = [name for bit, name in spec.ESR_ERROR_BITS.items() if esr & bit]
+        if not bits:
+            return
+        texts = self._error_texts()
+        text = "; ".join(texts) if texts else ", ".join(bits)
+        raise InstrumentError(f"{self.resource_name} refused {_shorten(command)!r}: {text}",
+                              command, text)
+
+    def _error_texts(self) -> list[str]:
+        if self._error_query is None:
+            return []
+        texts: list[str] = []
+        for _ in range(20):                   # bounded: a queue holds ~20 entries
+            try:
+                with self._link.lock:
+                    reply = self._link.inst.query(self._error_query).strip()
+            except _visa_errors() as exc:
+                # no error query on this firmware: use the status bits from now on
+                log.info("%s: %s not answered (%s); reporting status bits only",
+                         self.resource_name, self._error_query, exc)
+                self._error_query = None
+                try:
+                    self._link.inst.write("*CLS")
+                except _visa_errors():
+                    pass
+                break
+            code = reply.split(",", 1)[0].strip()
+            try:
+                if int(float(code)) == 0:
+                    break
+            except ValueError:
+                pass
+            texts.append(reply)
+        return texts
+
+    # ------------------------------------------------------------------ identification
+    def identify(self) -> Identity:
+        reply = self.query("*IDN?")
+        try:
+            return Identity.parse(reply)
+        except ValueError as exc:
+            raise InstrumentError(f"{self.resource_name}: {exc}") from None
+
+    # ------------------------------------------------------------------ queries
+    def basic_wave(self, channel: int) -> BasicWave:
+        return BasicWave.parse(self.query(f"C{_channel(channel)}:BSWV?"))
+
+    def output_state(self, channel: int) -> OutputState:
+        return OutputState.parse(self.query(f"C{_channel(channel)}:OUTP?"))
+
+    def arb_selection(self, channel: int) -> ArbSelection:
+        return ArbSelection.parse(self.query(f"C{_channel(channel)}:ARWV?"))
+
+    def get_waveform(self, channel: int) -> str:
+        return self.basic_wave(channel).waveform
+
+    def get_frequency(self, channel: int) -> float | None:
+        return self.basic_wave(channel).frequency_hz
+
+    def get_amplitude(self, channel: int) -> float | None:
+        return self.basic_wave(channel).amplitude_vpp
+
+    def get_offset(self, channel: int) -> float | None:
+        return self.basic_wave(channel).offset_v
+
+    def get_phase(self, channel: int) -> float | None:
+        return self.basic_wave(channel).phase_deg
+
+    def get_output(self, channel: int) -> bool:
+        return self.output_state(channel).on
+
+    def get_load(self, channel: int) -> str | None:
+        return self.output_state(channel).load
+
+    # ------------------------------------------------------------------ checks
+    def check(self, channel: int, wave: BasicWave, load: str | None) -> None:
+        """Raise InstrumentLimitError / SafetyLimitError if `wave` into `load` is not
+        allowed; an unknown load is taken as 50 ohm (the one that doubles the real voltage)."""
+        ch = _channel(channel)
+        instrument = f"the {spec.MODEL} specification (groundstation/instruments/spec4050.py)"
+        if wave.waveform not in spec.WAVEFORMS:
+            raise InstrumentLimitError(
+                f"channel {ch}: waveform {wave.waveform!r} is not one this driver sets "
+                f"({', '.join(spec.WAVEFORMS)}); nothing was sent", setting="waveform",
+                value=wave.waveform, limit=", ".join(spec.WAVEFORMS), source=instrument)
+        load_known = load if load is not None else "50"
+        lname = "high-impedance" if load_known == "HZ" else "50 ohm"
+        needed = spec.WAVE_PARAMETERS[wave.waveform]
+        values = {"FRQ": wave.frequency_hz, "AMP": wave.amplitude_vpp,
+                  "OFST": wave.offset_v, "PHSE": wave.phase_deg}
+        for name in needed:
+            v = values[name]
+            if v is None or not math.isfinite(v):
+                raise InstrumentLimitError(
+                    f"channel {ch}: {_LABEL[name]} is {'unknown' if v is None else v} for "
+                    f"{wave.waveform} (give it explicitly: the driver sends only settings it "
+                    f"has checked); nothing was sent", setting=_LABEL[name],
+                    value=str(v), limit="a finite number", source=instrument)
+
+        def refuse(cls, name, value, limit, source, text):
+            raise cls(f"channel {ch}: {text}; nothing was sent", setting=name,
+                      value=value, limit=limit, source=source)
+
+        if "FRQ" in needed:
+            f, fmax = wave.frequency_hz, spec.FREQUENCY_MAX_HZ[wave.waveform]
+            if not spec.FREQUENCY_MIN_HZ <= f <= fmax:
+                refuse(InstrumentLimitError, "frequency", f, fmax if f > fmax else spec.FREQUENCY_MIN_HZ,
+                       instrument, f"frequency {f:g} Hz is outside {spec.FREQUENCY_MIN_HZ:g} .. "
+                       f"{fmax:g} Hz for {wave.waveform} ({instrument})")
+        if "PHSE" in needed and not spec.PHASE_MIN_DEG <= wave.phase_deg <= spec.PHASE_MAX_DEG:
+            refuse(InstrumentLimitError, "phase", wave.phase_deg, spec.PHASE_MAX_DEG, instrument,
+                   f"phase {wave.phase_deg:g} deg is outside {spec.PHASE_MIN_DEG:g} .. "
+                   f"{spec.PHASE_MAX_DEG:g} deg ({instrument})")
+        amp = wave.amplitude_vpp if "AMP" in needed else 0.0
+        ofst = wave.offset_v
+        if "AMP" in needed:
+            lo, hi = spec.AMPLITUDE_MIN_VPP[load_known], spec.AMPLITUDE_MAX_VPP[load_known]
+            if not lo <= amp <= hi:
+                refuse(InstrumentLimitError, "amplitude", amp, hi if amp > hi else lo, instrument,
+                       f"amplitude {amp:g} Vpp is outside {lo:g} .. {hi:g} Vpp into a {lname} "
+                       f"load ({instrument})")
+        omax = spec.OFFSET_MAX_V[load_known]
+        if abs(ofst) > omax:
+            refuse(InstrumentLimitError, "offset", ofst, omax, instrument,
+                   f"offset {ofst:g} V is beyond +-{omax:g} V into a {lname} load ({instrument})")
+        emax = spec.ENVELOPE_MAX_V[load_known]
+        if abs(ofst) + amp / 2 > emax:
+            refuse(InstrumentLimitError, "envelope", abs(ofst) + amp / 2, emax, instrument,
+                   f"|offset| + amplitude/2 = {abs(ofst) + amp / 2:g} V is beyond {emax:g} V into "
+                   f"a {lname} load ({instrument})")
+        if self.limits is None:
+            return
+        lim = self.limits
+        note = ("" if load_known == "HZ" else
+                f" (the load is set to {'50 ohm' if load else 'an unknown value, taken as 50 ohm'}: "
+                f"into the high-impedance amplifier input the real voltage is twice the setting)")
+        if "AMP" in needed:
+            real = spec.volts_at_high_z(amp, load_known)
+            if real > lim.max_amplitude_vpp:
+                refuse(SafetyLimitError, "amplitude", real, lim.max_amplitude_vpp, lim.source,
+                       f"amplitude {real:g} Vpp at the amplifier is above the testbed's safety "
+                       f"limit of {lim.max_amplitude_vpp:g} Vpp (fg_max_amplitude in "
+                       f"{lim.source}){note}")
+        real_ofst = spec.volts_at_high_z(ofst, load_known)
+        if abs(real_ofst) > lim.max_offset_v:
+            refuse(SafetyLimitError, "offset", real_ofst, lim.max_offset_v, lim.source,
+                   f"offset {real_ofst:g} V at the amplifier is beyond the testbed's safety "
+                   f"limit of +-{lim.max_offset_v:g} V (fg_max_offset in {lim.source}){note}")
+
+    # ------------------------------------------------------------------ settings
+    def configure(self, channel: int, *, waveform: str | None = None,
+                  frequency_hz: float | None = None, amplitude_vpp: float | None = None,
+                  offset_v: float | None = None, phase_deg: float | None = None) -> BasicWave:
+        """Change any of the basic-wave settings: the resulting state is checked as a
+        whole and sent as one BSWV command; returns the state sent."""
+        ch = _channel(channel)
+        with self._link.lock:
+            current = self.basic_wave(ch)
+            load = self.output_state(ch).load
+            # a value the instrument does not report for the current waveform (DC has no
+            # frequency or amplitude) stays None - "unknown", which check() refuses - rather
+            # than letting the instrument fall back on a value nobody checked
+            new = BasicWave(
+                (waveform or current.waveform).upper(),
+                float(frequency_hz) if frequency_hz is not None else current.frequency_hz,
+                float(amplitude_vpp) if amplitude_vpp is not None else current.amplitude_vpp,
+                float(offset_v) if offset_v is not None else (current.offset_v or 0.0),
+                float(phase_deg) if phase_deg is not None else (current.phase_deg or 0.0))
+            self.check(ch, new, load)
+            body = ",".join(f"{n},{v if isinstance(v, str) else spec.format_number(v)}"
+                            for n, v in new.command_pairs(current))
+            self._write_checked(f"C{ch}:BSWV {body}")
+            return new
+
+    def set_waveform(self, channel: int, waveform: str) -> BasicWave:
+        return self.configure(channel, waveform=waveform)
+
+    def set_frequency(self, channel: int, frequency_hz: float) -> BasicWave:
+        return self.configure(channel, frequency_hz=frequency_hz)
+
+    def set_amplitude(self, channel: int, amplitude_vpp: float) -> BasicWave:
+        return self.configure(channel, amplitude_vpp=amplitude_vpp)
+
+    def set_offset(self, channel: int, offset_v: float) -> BasicWave:
+        return self.configure(channel, offset_v=offset_v)
+
+    def set_phase(self, channel: int, phase_deg: float) -> BasicWave:
+        return self.configure(channel, phase_deg=phase_deg)
+
+    def set_output(self, channel: int, on: bool) -> None:
+        """Output on (after checking the channel's current settings, which the front
+        panel may have changed) or off (always allowed, never checked)."""
+        ch = _channel(channel)
+        if not on:
+            self._write_checked(f"C{ch}:OUTP OFF")
+            return
+        with self._link.lock:
+            self.check(ch, self.basic_wave(ch), self.output_state(ch).load)
+            self._write_checked(f"C{ch}:OUTP ON")
+
+    def set_load(self, channel: int, load: str | int) -> None:
+        """The load the amplitude refers to: 'HZ' (the base-stage amplifier) or 50."""
+        ch = _channel(channel)
+        try:
+            new = spec.normalise_load(load)
+        except ValueError as exc:
+            raise InstrumentLimitError(f"channel {ch}: {exc}; nothing was sent", setting="load",
+                                       value=str(load), limit="HZ or 50",
+                                       source=f"the {spec.MODEL} specification") from None
+        with self._link.lock:
+            state = self.output_state(ch)
+            self.check(ch, self.basic_wave(ch), new)
+            self._write_checked(f"C{ch}:OUTP {'ON' if state.on else 'OFF'},LOAD,{new}")
+
+    # ------------------------------------------------------------------ arbitrary waveforms
+    def select_arbitrary(self, channel: int, *, name: str | None = None,
+                         index: int | None = None) -> None:
+        """Select a stored arbitrary waveform by name (user) or index (built-in)."""
+        ch = _channel(channel)
+        if (name is None) == (index is None):
+            raise ValueError("give exactly one of name and index")
+        if name is not None:
+            _check_arb_name(ch, name)
+            self._write_checked(f"C{ch}:ARWV NAME,{name}")
+        else:
+            if int(index) < 0:
+                raise InstrumentLimitError(f"channel {ch}: arbitrary waveform index {index} is "
+                                           f"negative; nothing was sent", setting="index",
+                                           value=index, limit=0,
+                                           source=f"the {spec.MODEL} specification")
+            self._write_checked(f"C{ch}:ARWV INDEX,{int(index)}")
+
+    def upload_arbitrary(self, channel: int, volts: Iterable[float], *, name: str,
+                         frequency_hz: float, select: bool = True) -> ArbUpload:
+        """Upload one period of a waveform given in volts (at a high-impedance load) and,
+        with `select`, play it: ARB at `frequency_hz` (1 / period), amplitude 2*max|v|,
+        offset 0.  The output state is left as it is.
+
+        The samples are scaled symmetrically (0 V is code 0) so the waveform's mean stays
+        exact and no offset is needed; the amplitude set is the symmetric span, never
+        less than the waveform's real peak-to-peak, and that is what is checked."""
+        ch = _channel(channel)
+        _check_arb_name(ch, name)
+        v = np.asarray(list(volts) if not isinstance(volts, np.ndarray) else volts, dtype=float)
+        source = f"the {spec.MODEL} specification (groundstation/instruments/spec4050.py)"
+        if v.ndim != 1 or not spec.ARB_POINTS_MIN <= len(v) <= spec.ARB_POINTS_MAX:
+            raise InstrumentLimitError(
+                f"channel {ch}: an arbitrary waveform has {spec.ARB_POINTS_MIN} .. "
+                f"{spec.ARB_POINTS_MAX} points, not {v.size}; nothing was sent", setting="points",
+                value=int(v.size), limit=spec.ARB_POINTS_MAX, source=source)
+        if not np.all(np.isfinite(v)):
+            raise InstrumentLimitError(f"channel {ch}: the waveform has non-finite samples; "
+                                       f"nothing was sent", setting="samples", value="nan/inf",
+                                       limit="finite", source=source)
+        peak = float(np.max(np.abs(v)))
+        if peak == 0.0:
+            raise InstrumentLimitError(f"channel {ch}: the waveform is all zeros; nothing was sent",
+                                       setting="amplitude", value=0.0,
+                                       limit=spec.AMPLITUDE_MIN_VPP["HZ"], source=source)
+        codes = np.clip(np.round(v / peak * spec.ARB_CODE_FULL_SCALE),
+                        spec.ARB_CODE_MIN, spec.ARB_CODE_MAX).astype(np.int16)
+        wave = BasicWave("ARB", float(frequency_hz), 2 * peak, 0.0, 0.0)
+        with self._link.lock:
+            load = self.output_state(ch).load
+            self.check(ch, wave, load)
+            header = (f"C{ch}:WVDT WVNM,{name},LENGTH,{2 * len(codes)}B,"
+                      f"FREQ,{spec.format_number(wave.frequency_hz)},"
+                      f"AMPL,{spec.format_number(wave.amplitude_vpp)},OFST,0,PHASE,0,WAVEDATA,")
+            self._write_checked(header, binary=codes)
+            if select:
+                self.select_arbitrary(ch, name=name)
+                self.configure(ch, waveform="ARB", frequency_hz=wave.frequency_hz,
+                               amplitude_vpp=wave.amplitude_vpp, offset_v=0.0, phase_deg=0.0)
+        return ArbUpload(ch, name, len(codes), wave.frequency_hz, wave.amplitude_vpp, 0.0, codes)
+
+    # ------------------------------------------------------------------ summary
+    def describe(self, channel: int) -> str:
+        w, o = self.basic_wave(channel), self.output_state(channel)
+        parts = [w.waveform]
+        for label, value, unit in (("f", w.frequency_hz, "Hz"), ("amp", w.amplitude_vpp, "Vpp"),
+                                   ("offset", w.offset_v, "V"), ("phase", w.phase_deg, "deg")):
+            if value is not None:
+                parts.append(f"{label} {value:g} {unit}")
+        if w.waveform == "ARB":
+            sel = self.arb_selection(channel)
+            parts.append(f"arb {sel.name or sel.index}")
+        load = {"HZ": "high-Z", "50": "50 ohm", None: "load ?"}[o.load]
+        return f"C{channel}: {', '.join(parts)}; output {'ON' if o.on else 'off'} ({load})"
+
+
+_LABEL = {"FRQ": "frequency", "AMP": "amplitude", "OFST": "offset", "PHSE": "phase"}
+
+
+def _channel(channel: int) -> int:
+    if channel not in spec.CHANNELS:
+        raise ValueError(f"channel must be one of {spec.CHANNELS}, not {channel!r}")
+    return int(channel)
+
+
+def _check_arb_name(ch: int, name: str) -> None:
+    if not spec.ARB_NAME_PATTERN.match(name):
+        raise InstrumentLimitError(
+            f"channel {ch}: arbitrary waveform name {name!r} must be a letter then up to 15 "
+            f"letters, digits or '_'; nothing was sent", setting="name", value=name,
+            limit=spec.ARB_NAME_PATTERN.pattern, source=f"the {spec.MODEL} specification")
+
+
+def _shorten(command: str, n: int = 120) -> str:
+    return command if len(command) <= n else command[:n] + "..."
+
+
+def open_generator(resource: str, *, backend: str | None = None, limits: SafetyLimits | None = None,
+                   testbed=None, timeout_s: float = 5.0,
+                   check_model: bool = True) -> FunctionGenerator4050:
+    """Open a 4050-series generator: `resource` is a VISA address (USB0::...::INSTR,
+    TCPIP0::host::port::SOCKET, ...); `backend` '@py' (default), '@ivi' or 'x.yaml@sim';
+    safety limits from `limits` or from `testbed` (a Testbed record)."""
+    if limits is None and testbed is not None:
+        limits = SafetyLimits.from_testbed(testbed)
+    backend = normalise_backend(backend)
+    rm = _resource_manager(backend)
+    link = _Link(rm, resource, backend, int(timeout_s * 1000))
+    try:
+        return FunctionGenerator4050(link, limits=limits, check_model=check_model)
+    except _visa_errors() as exc:
+        raise InstrumentLinkError(f"cannot open {resource} on {backend}: "
+                                  f"{str(exc).strip() or type(exc).__name__}") from None
+    except GroundStationError:
+        raise
+    except Exception as exc:       # pyvisa raises ValueError etc. for malformed addresses
+        link.shutdown()
+        raise InstrumentLinkError(f"cannot open {resource} on {backend}: {exc}") from None
+
+
+__all__ = ["ArbSelection", "ArbUpload", "BasicWave", "FunctionGenerator4050", "Identity",
+           "InstrumentError", "InstrumentLimitError", "InstrumentLinkError", "OutputState",
+           "ResourceListing", "SafetyLimitError", "SafetyLimits", "SettingRefusedError",
+           "list_resources", "open_generator"]
