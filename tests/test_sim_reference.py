@@ -319,3 +319,29 @@ def test_seed_changes_the_noise_and_only_the_noise(dictionary):
     a, b, c = gyro(1), gyro(1), gyro(2)
     assert np.array_equal(a, b) and not np.array_equal(a, c)
     assert abs(a.std() - c.std()) < 0.3 * a.std()
+
+
+@pytest.mark.parametrize("anti_windup", [1, 0])
+def test_anti_windup_holds_the_integrator_while_saturated(tmp_path, dictionary, anti_windup):
+    """A PID controller asked for far more torque than the motor has: with conditional
+    integration (anti_windup = 1) the integrator stops while saturated, so the axis
+    turns back as soon as the reference does; without it the wound-up integrator drives
+    the axis further the wrong way for a long time."""
+    path = variant(tmp_path, "rigid_1dof", encoder_noise="0.0")
+    fw, op = firmware(dictionary, path)
+    J = load_testbed(path).mechanics["J"]
+    w = 2 * np.pi * 5
+    op.upload(relative_c0=pid_sos(kp=J * w * w, ki=J * w**3, kd=2 * J * w, tau=1 / 3000),
+              saturation_coarse=5.0, anti_windup=anti_windup, travel_limit=0.349)
+    op("SET_MODE", mode="RELATIVE")
+    op("ARM")
+    op("SET_REFERENCE", reference=0.2)                       # a large step: saturates for long
+    keep_alive(fw, op, 1200)
+    op("SET_REFERENCE", reference=0.0)                       # and back
+    cols, _ = keep_alive(fw, op, 2400)
+    phi = cols["encoder_outer"]
+    away = phi.max() - phi[0]                                # travel further the wrong way
+    if anti_windup:
+        assert away < 0.005 and abs(phi[1200]) < 0.01        # turns back at once, home in 1 s
+    else:
+        assert away > 0.05 and phi[1200] > 0.1               # the wound-up integrator holds on

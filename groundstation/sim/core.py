@@ -26,7 +26,8 @@ FW_MODE, FW_ARMED, FW_FAULT, FW_COMP_ON, FW_REF, FW_I1, FW_I2 = 0, 1, 2, 3, 4, 5
 FW_PROF_ACTIVE, FW_PROF_POS, FW_PROF_TARGET, FW_LAST_HEARD, FW_TICK = 7, 8, 9, 10, 11
 FW_LOS_EST, FW_PREV_ENC, FW_KP, FW_SAT1, FW_SAT2, FW_WD_TICKS, FW_SESSION = 12, 13, 14, 15, 16, 17, 18
 FW_RATE_REF, FW_TRAVEL, FW_T_DAHL, FW_COMP_TORQUE, FW_ENC_INIT, FW_ENC_INNER = 19, 20, 21, 22, 23, 24
-FW_SIZE = 25
+FW_ANTI_WINDUP = 25
+FW_SIZE = 26
 
 MODE_IDLE, MODE_OPEN_LOOP, MODE_RELATIVE, MODE_INERTIAL = 0, 1, 2, 3
 TARGET_REFERENCE, TARGET_RATE_REFERENCE, TARGET_CURRENT_COARSE, TARGET_CURRENT_FINE = 0, 1, 2, 3
@@ -203,9 +204,9 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
         sat2 = abs(u2) > lim2
         u1 = min(max(u1, -lim1), lim1)
         u2 = min(max(u2, -lim2), lim2)
-        if closed and not (sat1 or sat2):
+        if closed and not ((sat1 or sat2) and fw[FW_ANTI_WINDUP] > 0.5):
             # anti-windup by conditional integration: filter states advance only while
-            # neither actuator is saturated
+            # neither actuator is saturated (unless the table switches it off)
             base = 0 if mode == MODE_RELATIVE else 3
             for f in range(base, base + 3):
                 zs[f, :, :] = zs_new[f, :, :]

@@ -102,6 +102,7 @@ class Engine:
         fw[core.FW_SAT2] = p["saturation_fine"]
         fw[core.FW_WD_TICKS] = p["watchdog_timeout"] * self.rate
         fw[core.FW_TRAVEL] = p["travel_limit"]
+        fw[core.FW_ANTI_WINDUP] = p["anti_windup"]
         tau = 1.0 / (2 * math.pi * p["complementary_crossover"])
         self.k[core.K_COMP_ALPHA] = tau / (tau + 1.0 / self.rate)
         npts = int(p["friction_comp_table_points"])
