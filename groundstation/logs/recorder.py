@@ -148,11 +148,25 @@ class Recorder:
                                  args=(self._inbox, self._outbox, str(self._protocol_dir()),
                                        {**self.config, "path": str(path), "run": run}))
         self._proc.start()
-        try:
-            msg = self._outbox.get(timeout=timeout)
-        except queue.Empty:
-            self._kill()
-            raise RecorderError(f"the log writer did not start within {timeout} s") from None
+        deadline = time.monotonic() + timeout
+        while True:
+            try:
+                msg = self._outbox.get(timeout=0.2)
+                break
+            except queue.Empty:
+                pass
+            if not self._proc.is_alive():
+                code = self._proc.exitcode
+                self._kill()
+                # the usual cause: a script without a main guard, which the writer's
+                # spawned interpreter runs again while importing it
+                raise RecorderError(
+                    f"the log writer process ended at start (exit code {code}); in a script, "
+                    "put the code under `if __name__ == \"__main__\":` (Python's rule for "
+                    "programs that start processes)") from None
+            if time.monotonic() > deadline:
+                self._kill()
+                raise RecorderError(f"the log writer did not start within {timeout} s") from None
         if msg[0] != "started":
             self._kill()
             raise RecorderError(msg[1])
