@@ -253,7 +253,8 @@ class Testbed:
     def dwell(self, seconds: float, progress: Callable[[float], None] | None = None) -> None:
         """Let `seconds` of device time pass (fast on the fast simulator)."""
         self._check_running()
-        self.clock.advance(seconds, progress)
+        # a fault ends the wait at once: the log then ends near the fault, not a minute on
+        self.clock.advance(seconds, progress, until=lambda: self.state.fault)
         self._check_running()
 
     def pause(self, prompt: str) -> None:
