@@ -6,6 +6,7 @@
     groundstation protocol info|check      the protocol dictionary
     groundstation record --folder logs     record a session to HDF5 (see cli_logs.py)
     groundstation params validate|upload|show|rollback   controller designs (see cli_params.py)
+    groundstation profile show|play FILE   command profiles (see cli_profile.py)
     groundstation campaign show|run FILE   scripted test campaigns (see cli_campaign.py)
     groundstation fg list|identify|set|upload|off   the base-motion generator (cli_fg.py)
 """
@@ -20,7 +21,7 @@ import sys
 import threading
 import time
 
-from . import __version__, cli_campaign, cli_fg, cli_logs, cli_params
+from . import __version__, cli_campaign, cli_fg, cli_logs, cli_params, cli_profile
 from .dictionary import load_dictionary
 from .errors import GroundStationError
 
@@ -216,6 +217,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_gui)
     cli_logs.add_parsers(sub)
     cli_params.add_parsers(sub)
+    cli_profile.add_parsers(sub)
     cli_campaign.add_parsers(sub)
     cli_fg.add_parsers(sub)
     return p

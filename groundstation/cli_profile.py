@@ -1,0 +1,215 @@
+"""`groundstation profile ...`: command profiles (profiles/waveforms/*.toml).
+
+    groundstation profile show FILE [--csv OUT]
+                                 what the file makes: target, duration, samples, range, RMS,
+                                 rates, spectrum peak, checks against the target's range
+    groundstation profile play FILE [--device sim|ADDRESS] [--testbed F] [--mode MODE]
+                                 upload (CRC-checked, confirmed), set the mode, arm, start,
+                                 follow the progress, disarm at the end; on Ctrl-C or any
+                                 error: PROFILE_STOP and ABORT
+
+Exit codes: 0 done (shown / played to the end), 1 refused or failed (nothing sent, or the
+device was made safe), 2 the file cannot be read or is malformed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from .errors import GroundStationError
+
+EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
+MODES = ("OPEN_LOOP", "RELATIVE", "INERTIAL")
+
+
+def add_parsers(sub) -> argparse._SubParsersAction:
+    """Add `profile` to the CLI's subcommands; returns its own subparsers for more actions."""
+    p = sub.add_parser("profile", help="command profiles: show one, play one on the device")
+    actions = p.add_subparsers(dest="profile_action", required=True, metavar="ACTION")
+    _add_show(actions)
+    _add_play(actions)
+    return actions
+
+
+def _add_show(actions) -> None:
+    s = actions.add_parser("show", help="summarise a profile file and check it (no device needed)",
+                           description="Build the profile, print its summary and the checks the "
+                                       "device would make. Exit 0: may be played; 1: refused; "
+                                       "2: unreadable or malformed file.")
+    s.add_argument("file", help="profile file, e.g. profiles/waveforms/sine_reference_1hz.toml")
+    s.add_argument("--csv", default=None, metavar="OUT", help="also write the samples to this CSV file")
+    s.add_argument("--testbed", default=None,
+                   help="testbed file whose gyro range bounds a RATE_REFERENCE profile")
+    s.set_defaults(func=_cmd_show)
+
+
+def _add_play(actions) -> None:
+    s = actions.add_parser("play", help="upload a profile and play it on the device",
+                           description="Upload (blocks, CRC, HOUSEKEEPING confirmation), set the "
+                                       "mode, arm, start, follow HIGH_RATE.profile_index to the "
+                                       "end, disarm. A relative REFERENCE profile is uploaded "
+                                       "after arming, offset by the held position. Ctrl-C or any "
+                                       "error: PROFILE_STOP and ABORT. Exit 0: played to the end; "
+                                       "1: refused, failed or interrupted (device left safe); "
+                                       "2: unreadable file.")
+    s.add_argument("file", help="profile file")
+    s.add_argument("--device", default="sim",
+                   help="sim (a simulated testbed started for this command) | tcp://HOST:PORT | "
+                        "HOST:PORT | serial://PORT?baud=N")
+    s.add_argument("--testbed", default=None, help="testbed file for --device sim (and its gyro range)")
+    s.add_argument("--mode", choices=MODES, default=None,
+                   help="mode to play in (default: OPEN_LOOP for currents, RELATIVE for a "
+                        "reference, INERTIAL for a rate reference)")
+    s.add_argument("--timeout", type=float, default=None,
+                   help="seconds to wait for the end after the start (default: duration + 10)")
+    s.add_argument("--take-over", action="store_true", help="end another host's session")
+    s.set_defaults(func=_cmd_play)
+
+
+def _fail(text: str, code: int = EXIT_REFUSED) -> int:
+    print(f"error: {text}", file=sys.stderr)
+    return code
+
+
+def _gyro_range(args) -> float:
+    from .profiles.profile import DEFAULT_GYRO_RANGE
+    if not args.testbed:
+        return DEFAULT_GYRO_RANGE
+    from .sim.testbed import load_testbed
+    return float(load_testbed(args.testbed).sensors["gyro_range"])
+
+
+def _load(args):
+    """(profile, check) or an exit code for an unreadable file."""
+    from .dictionary import load_dictionary
+    from .profiles.profile import ProfileFileError, check_profile, load_profile
+
+    try:
+        dictionary = load_dictionary(args.protocol_dir)
+        gyro = _gyro_range(args)
+        profile = load_profile(args.file, dictionary, validate=False)
+    except ProfileFileError as exc:
+        return _fail(str(exc), EXIT_UNREADABLE)
+    except GroundStationError as exc:
+        return _fail(str(exc), EXIT_UNREADABLE)
+    return dictionary, profile, check_profile(profile, dictionary, gyro_range=gyro), gyro
+
+
+def _cmd_show(args) -> int:
+    from .profiles.profile import sample_range, summarise, write_csv
+
+    loaded = _load(args)
+    if isinstance(loaded, int):
+        return loaded
+    dictionary, profile, check, gyro = loaded
+    for line in summarise(profile).lines():
+        print(line)
+    lo, hi = sample_range(dictionary, profile.target, gyro)
+    print(f"allowed:  {lo:g} … {hi:g} {profile.units} ({profile.target})")
+    if profile.description:
+        print(f"about:    {profile.description}")
+    if args.csv:
+        try:
+            write_csv(profile, args.csv)
+        except OSError as exc:
+            return _fail(f"{args.csv}: cannot write ({exc.strerror})")
+        print(f"samples written to {args.csv}")
+    for w in check.warnings:
+        print(f"warning:  {w}")
+    if not check.ok:
+        print(f"REFUSED: {len(check.problems)} problem(s)")
+        for p in check.problems:
+            print(f"problem:  {p}")
+        return EXIT_REFUSED
+    print("OK: the profile may be played")
+    return EXIT_OK
+
+
+def _upload_progress(step: str, fraction: float) -> None:
+    if sys.stderr.isatty():                   # a live percentage on a terminal, one line in a log
+        print(f"\r{step}: {100 * fraction:5.1f} %", end="", file=sys.stderr, flush=True)
+        if fraction >= 1.0:
+            print("", file=sys.stderr, flush=True)
+    elif fraction >= 1.0:
+        print(f"{step}: done", file=sys.stderr, flush=True)
+
+
+class _PlayProgress:
+    """Samples played, from HIGH_RATE.profile_index: live on a terminal, every 10 % otherwise."""
+
+    def __init__(self) -> None:
+        self.tty = sys.stderr.isatty()
+        self.decile = -1
+
+    def __call__(self, index: int, count: int) -> None:
+        fraction = index / count if count else 1.0
+        if self.tty:
+            print(f"\rplaying: {100 * fraction:5.1f} % ({index}/{count} samples, "
+                  f"{index / 1200:.1f} s)", end="", file=sys.stderr, flush=True)
+        elif int(fraction * 10) > self.decile:
+            self.decile = int(fraction * 10)
+            print(f"playing: {100 * fraction:3.0f} % ({index}/{count} samples)",
+                  file=sys.stderr, flush=True)
+
+    def done(self) -> None:
+        if self.tty:
+            print("", file=sys.stderr, flush=True)
+
+
+def _safety(player) -> str:
+    """What the operator needs to know about the device after play() made it safe."""
+    if player is None or not player.made_safe:
+        return "nothing was started on the device"
+    if player.safe_failures:
+        return ("COULD NOT CONFIRM THE DEVICE IS SAFE: " + "; ".join(player.safe_failures)
+                + " - without heartbeats its watchdog disarms it within watchdog_timeout")
+    return "PROFILE_STOP and ABORT completed: the device is disarmed and idle"
+
+
+def _cmd_play(args) -> int:
+    from .cli_params import _Device
+    from .profiles.upload import ProfilePlayer, default_mode
+
+    loaded = _load(args)
+    if isinstance(loaded, int):
+        return loaded
+    dictionary, profile, check, gyro = loaded
+    mode = args.mode or default_mode(profile.target)
+    if mode not in profile.info.modes:
+        return _fail(f"{args.file}: a {profile.target} profile plays in "
+                     f"{' or '.join(profile.info.modes)}, not {mode}; nothing was sent")
+    for w in check.warnings:
+        print(f"warning: {w}", file=sys.stderr)
+    if not check.ok:
+        return _fail(f"{args.file}: refused, nothing was sent: " + "; ".join(check.problems))
+    print(f"{profile.name}: {profile.target}, {profile.duration:g} s ({profile.sample_count} "
+          f"samples), mode {mode}", flush=True)
+    progress = _PlayProgress()
+    player = None
+    try:
+        with _Device(args) as device:
+            with ProfilePlayer(device.client, dictionary, gyro_range=gyro) as player:
+                try:
+                    result = player.play(profile, mode, timeout=args.timeout, progress=progress,
+                                         upload_progress=_upload_progress,
+                                         on_step=lambda text: print(f"{text} ...", flush=True))
+                except KeyboardInterrupt:
+                    progress.done()
+                    return _fail("interrupted: " + _safety(player))
+                progress.done()
+                rec = player.record
+                assert rec is not None
+                print(f"loaded: profile {rec.profile_id} crc {rec.crc:08x}, {rec.sample_count} "
+                      f"samples in {rec.upload_s:.2f} s"
+                      + (f", offset {rec.offset:.9g} rad" if rec.origin == "relative" else ""))
+                print(result.text())
+                if not result.completed:
+                    return _fail(f"{profile.name}: playback {result.reason}; " + _safety(player))
+                print("done: disarmed")
+    except KeyboardInterrupt:
+        return _fail("interrupted before playback: the device was not started")
+    except GroundStationError as exc:
+        progress.done()
+        return _fail(f"{exc}" + (f"; {_safety(player)}" if player is not None and player.made_safe else ""))
+    return EXIT_OK

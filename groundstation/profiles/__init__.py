@@ -1,0 +1,13 @@
+"""Command profiles: waveform generators (generators.py), profile files and their checks
+(profile.py), upload and playback on the device (upload.py).  See profiles/waveforms/."""
+
+from .profile import (TARGETS, Profile, ProfileCheck, ProfileError, ProfileFileError,
+                      ProfileRefused, ProfileSummary, check_profile, load_profile, preview,
+                      profile_from_dict, summarise, write_csv)
+from .upload import (PlaybackError, PlaybackResult, ProfileLoader, ProfilePlayer, ProfileRecord,
+                     ProfileUploadError, default_mode)
+
+__all__ = ["TARGETS", "PlaybackError", "PlaybackResult", "Profile", "ProfileCheck", "ProfileError",
+           "ProfileFileError", "ProfileLoader", "ProfilePlayer", "ProfileRecord", "ProfileRefused",
+           "ProfileSummary", "ProfileUploadError", "check_profile", "default_mode", "load_profile",
+           "preview", "profile_from_dict", "summarise", "write_csv"]
