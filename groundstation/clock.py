@@ -15,9 +15,10 @@ wait at once).  `SteppedClock` drives a manually paced SimulatedDevice:
 
 from __future__ import annotations
 
+import contextlib
 import threading
 import time
-from typing import Callable
+from typing import Callable, Iterator
 
 from .errors import GroundStationError, LinkLostError
 
@@ -58,6 +59,11 @@ class WallClock:
                 progress(1.0 - (end - now) / seconds if seconds > 0 else 1.0)
             time.sleep(min(0.05, end - now))
 
+    @contextlib.contextmanager
+    def fast_forward(self) -> Iterator[None]:
+        """Real time cannot be hurried."""
+        yield
+
     def close(self) -> None:
         pass
 
@@ -77,6 +83,8 @@ class SteppedClock:
         client.subscribe(self._on_block)
         self._lock = threading.Lock()          # one of idle / advance runs the device
         self._stop = threading.Event()
+        self._fast = threading.Event()         # fast_forward(): the idle thread runs flat out
+        self.error: BaseException | None = None
         self._idle = threading.Thread(target=self._idle_loop, name="gs-sim-idle-clock", daemon=True)
         self._idle.start()
 
@@ -89,11 +97,43 @@ class SteppedClock:
     def _idle_loop(self) -> None:
         period = 0.01
         step = max(1, int(round(self.rate * period)))
-        while not self._stop.wait(period):
+        while not self._stop.is_set():
+            if self._fast.is_set():
+                with self._lock:
+                    try:
+                        self._chunk(CHUNK_TICKS)
+                    except BaseException as exc:          # seen by the script at fast_forward's end
+                        self.error = exc
+                        self._fast.clear()
+                continue
+            if self._stop.wait(period):
+                return
             with self._lock:
                 if self._stop.is_set():
                     return
                 self.device.run_ticks(step)
+
+    def _chunk(self, n: int) -> None:
+        """n periods, their frames received, and a HEARTBEAT (the watchdog counts ticks)."""
+        self.device.run_ticks(n)
+        self._wait_for(self.device.firmware.tick & 0xFFFFFFFF)
+        self.client.command("HEARTBEAT")
+
+    @contextlib.contextmanager
+    def fast_forward(self) -> Iterator[None]:
+        """While inside, device time runs as fast as the link allows even though the
+        script is not in advance() - for steps that wait on the device themselves (a
+        profile playing to its end)."""
+        self.error = None
+        self._fast.set()
+        try:
+            yield
+        finally:
+            self._fast.clear()
+            with self._lock:                          # the chunk under way has finished
+                pass
+        if self.error is not None:
+            raise self.error
 
     def _wait_for(self, tick: int) -> None:
         deadline = time.monotonic() + FLOW_TIMEOUT_S
@@ -114,10 +154,8 @@ class SteppedClock:
                 if self.abort.is_set():
                     raise ScriptAborted("aborted")
                 n = min(CHUNK_TICKS, total - done)
-                self.device.run_ticks(n)
+                self._chunk(n)
                 done += n
-                self._wait_for(self.device.firmware.tick & 0xFFFFFFFF)
-                self.client.command("HEARTBEAT")
                 if progress is not None:
                     progress(done / total)
                 if until is not None and until():
@@ -125,5 +163,6 @@ class SteppedClock:
 
     def close(self) -> None:
         self._stop.set()
-        self._idle.join(timeout=5)
+        self._fast.clear()
+        self._idle.join(timeout=15)
         self.client.unsubscribe(self._on_block)

@@ -249,6 +249,34 @@ class Testbed:
         self.echo(f"parameter table {self.last_upload.crc:08x} verified ({design.name})")
         return self.last_upload
 
+    def play(self, profile, mode: str | None = None, *, max_seconds: float | None = None,
+             progress: Callable[[float], None] | None = None):
+        """Play a command profile (a file or a Profile): upload it (verified), set the
+        mode, arm, play it sample-exact to its end, disarm.  On the fast simulator the
+        device clock runs flat out meanwhile.  `max_seconds` shortens a longer profile
+        (trial runs, tests) with a smooth return to rest over its last 0.2 s.  Returns
+        the PlaybackResult; raises when playback did not complete."""
+        from .profiles.profile import Profile, load_profile
+        from .profiles.upload import ProfilePlayer
+
+        self._check_running()
+        prof = profile if isinstance(profile, Profile) else load_profile(profile, self.d)
+        if max_seconds is not None and prof.duration > max_seconds:
+            prof = _shortened(prof, max_seconds)
+        count = prof.sample_count
+        player = ProfilePlayer(self.client, self.d, journal=self._journal)
+        try:
+            with self.clock.fast_forward():
+                result = player.play(prof, mode, on_step=lambda text: self.echo(f"{prof.name}: {text}"),
+                                     progress=(lambda done, total: progress(done / max(total, 1)))
+                                     if progress else None)
+        finally:
+            player.close()
+        if not result.completed:
+            raise ScriptError(f"profile {prof.name}: {result.text()}")
+        self.echo(f"profile {prof.name}: {count} samples played")
+        return result
+
     # ------------------------------------------------------------------ time
     def dwell(self, seconds: float, progress: Callable[[float], None] | None = None) -> None:
         """Let `seconds` of device time pass (fast on the fast simulator)."""
@@ -405,3 +433,17 @@ class Testbed:
         sim, self._sim = self._sim, None
         if sim is not None:
             sim.stop()
+
+
+def _shortened(profile, seconds: float):
+    """The first `seconds` of a profile, brought back to rest (0) over its last 0.2 s."""
+    import dataclasses
+
+    import numpy as np
+
+    n = max(4, int(seconds * profile.rate))
+    k = max(2, min(int(0.2 * profile.rate), n // 2))
+    samples = np.array(profile.samples[:n], dtype=np.float64)
+    fade = 0.5 + 0.5 * np.cos(np.pi * np.arange(1, k + 1) / k)      # 1 -> 0 with zero slope
+    samples[-k:] *= fade
+    return dataclasses.replace(profile, samples=samples, name=f"{profile.name} (first {seconds:g} s)")

@@ -181,3 +181,22 @@ def test_cli_show_and_run(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text("[campaign]\n")
     assert main(["campaign", "run", str(bad), "--fast"]) == 2
+
+
+@pytest.mark.parametrize("name", ["friction_hysteresis_1dof", "friction_hysteresis_2dof",
+                                  "steady_state_friction", "open_loop_sysid"])
+def test_thesis_procedures_run_end_to_end(tmp_path, name):
+    """Each shipped procedure, its profiles shortened to 0.5 s by the test override (the
+    campaign file is unchanged): every run completes with one valid log that carries the
+    table and the profile played."""
+    c = load_campaign(CAMPAIGNS / f"{name}.toml")
+    report, _, armed = run_campaign(CAMPAIGNS / f"{name}.toml", tmp_path, max_step_seconds=0.5)
+    assert report.status == "completed", report.summary()
+    assert report.completed_runs == list(range(1, c.runs + 1)) and not armed
+    assert len(report.recordings) == c.runs
+    for rec in report.recordings:
+        assert rec["dropped"] == 0 and rec["discarded_blocks"] == 0
+        check_log(rec["files"][0], name)
+        with LogReader(rec["files"][0]) as log:
+            played = [p.data for p in log.journal("profile")]
+        assert any(p.get("action") == "played" for p in played), played
