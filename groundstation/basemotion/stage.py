@@ -61,6 +61,14 @@ class BaseStageModel:
         r = f / self.natural_frequency_hz
         return self.dc_gain_rad_per_volt / (1 - r * r + 2j * self.damping * r)
 
+    def settling_time_s(self, fraction: float = 0.01) -> float:
+        """Time for a start-up transient to decay to `fraction` of its size: the
+        envelope exp(-zeta wn t) of the lightly damped stage.  A recording of the
+        steady-state motion starts at least this long after the output went on."""
+        if not 0 < fraction < 1:
+            raise BaseMotionError(f"fraction must be between 0 and 1, not {fraction!r}")
+        return math.log(1.0 / fraction) / (self.damping * 2 * math.pi * self.natural_frequency_hz)
+
     def held_response(self, frequency_hz, sample_interval_s: float) -> np.ndarray:
         """Response (rad/V) from a staircase input (samples held for `sample_interval_s`)
         to the output at the sample instants: the zero-order-hold equivalent."""

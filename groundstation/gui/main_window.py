@@ -12,6 +12,7 @@ from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QMe
 from ..sim.testbed import TESTBEDS_DIR
 from .channel_tree import ChannelTree
 from .charts import StripChartPanel
+from .fg_panel import GeneratorPanel
 from .params_panel import ParameterPanel
 from .panels import CommandPanel, ConnectionBar, EventLog, RecordingPanel, ReplayBar, StatusPanel
 from .session import Session
@@ -56,6 +57,7 @@ class MainWindow(QMainWindow):
         self.events = EventLog(session)
         self.spectrum = SpectrumView(session.store, d)
         self.parameters = ParameterPanel(session, d)
+        self.generator = GeneratorPanel(session)
         self.docks = {}
         for name, widget, area in (("Channels", self.tree, Qt.DockWidgetArea.LeftDockWidgetArea),
                                    ("Commands", self.commands, Qt.DockWidgetArea.RightDockWidgetArea),
@@ -63,7 +65,8 @@ class MainWindow(QMainWindow):
                                    ("Recording", self.recording, Qt.DockWidgetArea.LeftDockWidgetArea),
                                    ("Events", self.events, Qt.DockWidgetArea.BottomDockWidgetArea),
                                    ("Spectrum", self.spectrum, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Parameters", self.parameters, Qt.DockWidgetArea.BottomDockWidgetArea)):
+                                   ("Parameters", self.parameters, Qt.DockWidgetArea.BottomDockWidgetArea),
+                                   ("Generator", self.generator, Qt.DockWidgetArea.BottomDockWidgetArea)):
             dock = QDockWidget(name)
             dock.setObjectName(name.lower().replace(" ", "_"))
             dock.setWidget(widget)
@@ -71,6 +74,7 @@ class MainWindow(QMainWindow):
             self.docks[name] = dock
         self.tabifyDockWidget(self.docks["Events"], self.docks["Spectrum"])
         self.tabifyDockWidget(self.docks["Events"], self.docks["Parameters"])
+        self.tabifyDockWidget(self.docks["Events"], self.docks["Generator"])
         self.docks["Events"].raise_()
 
         self.link_label = QLabel("not connected")
@@ -120,7 +124,8 @@ class MainWindow(QMainWindow):
         m = self.menuBar().addMenu("&Help")
         action(m, "&About", lambda: QMessageBox.about(
             self, "Ground station", "Ground station for hybrid-flexure-bearing testbeds.\n"
-            "Esc aborts: both motors to zero, drives off, mode IDLE."))
+            "Esc aborts: both motors to zero, drives off, mode IDLE, and the function "
+            "generator's outputs off."))
 
     # ------------------------------------------------------------------ actions
     def _load_design(self) -> None:
@@ -129,8 +134,8 @@ class MainWindow(QMainWindow):
         self.parameters.load_design_dialog()
 
     def abort(self) -> None:
-        self.session.abort()
-        self.statusBar().showMessage("ABORT sent", 3000)
+        self.session.abort()                  # the device's ABORT and the generator's outputs off
+        self.statusBar().showMessage("ABORT sent; function generator outputs off", 3000)
 
     def open_log_dialog(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "Open log", "", "Logs (*.h5)")

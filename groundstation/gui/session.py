@@ -1,5 +1,6 @@
 """The GUI's session controller: owns the link (or the replay), the simulator child
-process and the recorder, and turns their thread callbacks into Qt signals.
+process (with its function generator), the recorder and the function-generator
+controller, and turns their thread callbacks into Qt signals.
 
 Widgets never touch a socket or a file: they call this object's methods, which run
 anything that can block (connecting, commands, opening a log) on worker threads, and
@@ -25,6 +26,7 @@ from ..monitor import LimitMonitor
 from ..params.upload import ParameterHistory, ParameterLoader
 from ..sim.process import SimulatorProcess
 from ..stream import TelemetryStore
+from .generator import GeneratorController
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +57,10 @@ class Session(QObject):
         self.recorder: Recorder | None = None
         self.address: str = ""
         self.testbed: str | None = None
+        self._sim_testbed: str | None = None       # the testbed the running simulator has
+        #: the simulator's pace (control periods per 1/1200 s of wall time); tests raise it
+        #: to play a base-motion period in less wall time, the device's clock is unchanged
+        self.sim_speed = 1.0
         self.last_uploaded_crc: int | None = None
         self.replay_events: list[tuple[float, int, str]] = []
         self._want_connected = False
@@ -65,6 +71,14 @@ class Session(QObject):
         self._reconnect.setSingleShot(True)
         self._reconnect.timeout.connect(self._try_reconnect)
         self.sig_link_state.connect(self._on_link_state)
+        #: the base-motion function generator; Abort, disconnecting and closing switch its
+        #: outputs off whatever the link to the device is doing
+        self.generator = GeneratorController(self, journal=self._journal, parent=self)
+        self.generator.sig_failed.connect(
+            lambda action, text: self.sig_event.emit("ERROR", "generator", f"{action}: {text}"))
+        self.generator.sig_refused.connect(
+            lambda setting, text: self.sig_event.emit("WARNING", "generator", f"refused: {text}"))
+        self.generator.sig_info.connect(lambda text: self.sig_event.emit("INFO", "generator", text))
 
     # ------------------------------------------------------------------ sources
     @property
@@ -79,10 +93,18 @@ class Session(QObject):
     def connect_address(self, address: str) -> None:
         self._start_link(address)
 
+    @property
+    def fg_resource(self) -> str | None:
+        """The simulator's function generator (a VISA resource), when it is running."""
+        sim = self.sim
+        return sim.fg_resource if sim is not None and sim.proc is not None else None
+
     def _start_link(self, address: str) -> None:
         self.close_replay()
         self.disconnect_link()
-        if address != "sim" and self.sim is not None:   # leaving the simulator behind
+        # leaving the simulator behind, or asking for another testbed than it runs
+        if self.sim is not None and (address != "sim" or self._sim_testbed != self.testbed):
+            self.generator.forget_simulator()          # its outputs off while it can answer
             self.sim.stop()
             self.sim = None
         self.address = address
@@ -103,8 +125,11 @@ class Session(QObject):
             address = self.address
             if address == "sim":
                 if self.sim is None or self.sim.proc is None:
-                    self.sim = SimulatorProcess(pacing="realtime", testbed=self.testbed)
-                    self.sim.start()
+                    # with its function generator, so the GUI always has one to drive
+                    sim = SimulatorProcess(pacing="realtime", testbed=self.testbed, fg_port=0,
+                                           speed=self.sim_speed)
+                    sim.start()
+                    self.sim, self._sim_testbed = sim, self.testbed
                 address = self.sim.address
             client = open_client(self.d, address)
             client.subscribe(self.store)
@@ -127,7 +152,9 @@ class Session(QObject):
             self.sig_link_state.emit("failed", str(exc))
 
     def disconnect_link(self) -> None:
-        """Close the session (the device disarms) and stop the simulator child."""
+        """Close the session (the device disarms), switch the generator's outputs off
+        and stop the simulator child."""
+        self.generator.abort()
         self._want_connected = False
         self._reconnect.stop()
         client, self.client = self.client, None
@@ -135,14 +162,17 @@ class Session(QObject):
             self._worker(client.close, "gs-disconnect")
             self.sig_link_state.emit("closed", "")
         if self.sim is not None and self.address != "sim":
+            self.generator.forget_simulator()
             self.sim.stop()
             self.sim = None
 
     def shutdown(self) -> None:
-        """Everything off: recording closed, link closed, simulator stopped.  Signals are
-        blocked first: the widgets they would reach are being torn down."""
+        """Everything off: generator outputs off and closed, recording closed, link
+        closed, simulator stopped.  Signals are blocked first: the widgets they would
+        reach are being torn down."""
         self.blockSignals(True)
         self._closing = True
+        self.generator.shutdown()                   # first: while the simulator still answers
         self.stop_recording()
         self._want_connected = False
         self._reconnect.stop()
@@ -176,6 +206,7 @@ class Session(QObject):
             self._worker(old.close, "gs-close-lost")
         if self.address == "sim" and self.sim is not None and (
                 self.sim.proc is None or self.sim.proc.poll() is not None):
+            self.generator.close()                # its generator went with it
             self.sim.stop()
             self.sim = None                       # start a fresh simulator
         self.sig_link_state.emit("connecting", self.address)
@@ -223,7 +254,10 @@ class Session(QObject):
         self._worker(work, f"gs-cmd-{name}")
 
     def abort(self) -> None:
-        """ABORT now, whatever the state; reported as an event if it cannot be sent."""
+        """ABORT now, whatever the state: the generator's outputs off (fail safe, even
+        with no device connected) and the device's ABORT; reported as an event if the
+        latter cannot be sent."""
+        self.generator.abort()
         client = self.client
         if client is None:
             self.sig_event.emit("WARNING", "command", "ABORT: no device connected")

@@ -239,10 +239,7 @@ def list_resources(backend: str | None = None, query: str = "?*::INSTR") -> Reso
             except Exception as exc:      # any backend failure means "nothing found here"
                 notes.append(f"listing {query} on {backend} failed: {exc}")
             finally:
-                try:
-                    rm.close()
-                except Exception as exc:
-                    log.debug("closing the resource manager: %s", exc)
+                _release_manager(rm)
     for w in caught:
         if issubclass(w.category, ResourceWarning):   # the backend's own leak, not news
             log.debug("%s: %s", backend, w.message)
@@ -251,6 +248,20 @@ def list_resources(backend: str | None = None, query: str = "?*::INSTR") -> Reso
     for note in notes:
         log.info("VISA listing: %s", note)
     return ResourceListing(backend, found, tuple(notes))
+
+
+def _release_manager(rm) -> None:
+    """Close a resource manager unless sessions are still open through it.
+
+    pyvisa hands out one ResourceManager per VISA library (ResourceManager("@py") twice
+    is the same object), and closing it closes every session opened through it: listing
+    the resources, or closing one generator, must not cut another generator off."""
+    try:
+        if rm.list_opened_resources():
+            return
+        rm.close()
+    except Exception as exc:
+        log.debug("closing the resource manager: %s", exc)
 
 
 def _visa_errors() -> tuple[type[BaseException], ...]:
@@ -352,7 +363,7 @@ class _Link:
                     log.error("%s: outputs may still be ON: %s", self.resource_name, exc)
             self._close_quietly(self.inst)
             self.inst = None
-            self._close_quietly(self.rm)
+            _release_manager(self.rm)
 
 
 # ---------------------------------------------------------------------------------- driver
