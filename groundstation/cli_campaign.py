@@ -41,7 +41,8 @@ def add_parsers(sub) -> argparse._SubParsersAction:
     s.add_argument("--report", default=None, help="report file (default: LOG_FOLDER/report.json)")
     s.add_argument("--resume", default=None, help="a report of a failed run: continue from its failed run")
     s.add_argument("--max-step-seconds", type=float, default=None,
-                   help="cap every dwell and base-motion duration (trial runs and tests)")
+                   help="cap every dwell and profile at S seconds (trial runs and tests; "
+                        "a base-motion profile keeps its period)")
     s.add_argument("--seed", type=int, default=0, help="simulator seed")
     s.add_argument("--take-over", action="store_true", help="end another host's session")
     s.set_defaults(func=_cmd_run)
