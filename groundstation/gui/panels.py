@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import time
 from datetime import datetime
+from pathlib import Path
 
 from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QFont
@@ -40,6 +41,7 @@ class ConnectionBar(QWidget):
         self.kind.addItems(["Simulated testbed", "Ethernet (tcp://host:port)", "Serial port"])
         self.testbed = QComboBox()
         self.testbed.addItems(testbeds)
+        self._show_testbed(None)                 # the simulator's default, until one is chosen
         self.address = QLineEdit("tcp://127.0.0.1:5020")
         self.serial = QComboBox()
         self.serial.setEditable(True)
@@ -89,7 +91,19 @@ class ConnectionBar(QWidget):
             self.session.connect_address(f"serial://{self.serial.currentText()}?baud={self.baud.currentText()}")
         self.connect_button.setText("Disconnect")
 
+    def _show_testbed(self, path: str | None) -> None:
+        """Select the testbed the simulator runs (a script or the CLI may have chosen it),
+        so the bar never names another one."""
+        from ..sim.testbed import DEFAULT_TESTBED
+        name = Path(path).name if path else DEFAULT_TESTBED.name
+        for i in range(self.testbed.count()):
+            if Path(self.testbed.itemText(i)).name == name:
+                self.testbed.setCurrentIndex(i)
+                return
+
     def _link_state(self, state: str, message: str) -> None:
+        if state == "connecting" and self.session.address == "sim":
+            self._show_testbed(self.session.testbed)
         self.connect_button.setText("Connect" if state == "closed" else "Disconnect")
         self.lamp.setStyleSheet(lamp_style(LAMP.get(state, "#616161")))
         self.lamp.setToolTip(f"{state}: {message}")

@@ -80,7 +80,8 @@ class ParameterPanel(QWidget):
         lay.addWidget(self.design_label)
         lay.addWidget(self.result)
         lay.addWidget(self.progress)
-        split = QSplitter(Qt.Orientation.Vertical)
+        # side by side: the panel usually lives in a wide, low bottom dock
+        split = QSplitter(Qt.Orientation.Horizontal)
         self.tree = QTreeWidget()
         self.tree.setColumnCount(len(COLUMNS))
         self.tree.setHeaderLabels(list(COLUMNS))
@@ -97,7 +98,7 @@ class ParameterPanel(QWidget):
         self.phase_plot.setLabel("bottom", "frequency", units="Hz")
         self.phase_plot.setXLink(self.mag_plot)
         split.addWidget(self.bode_view)
-        split.setSizes([400, 250])
+        split.setSizes([600, 500])
         lay.addWidget(split, 1)
         self.load_button.clicked.connect(self.load_design_dialog)
         self.validate_button.clicked.connect(self.run_validation)
