@@ -41,6 +41,7 @@ def test_design_to_verified_table_and_back(qtbot, window, tmp_path):
     panel, session = window.parameters, window.session
     session.connect_sim("profiles/testbeds/relative_2dof.toml")
     qtbot.waitUntil(lambda: panel.device is not None, timeout=60000)   # read on connect
+    assert window.connection.testbed.currentText().endswith("relative_2dof.toml")
     original_crc = panel.device_crc
     assert tree_row(panel, "outer_loop_gain").text(3) == tree_row(panel, "outer_loop_gain").text(1)
 

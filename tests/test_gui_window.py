@@ -43,6 +43,8 @@ def test_live_data_reaches_the_charts_and_the_status(qtbot, window):
     assert x is not None and len(x) > 100 and np.isfinite(y).any()
     qtbot.waitUntil(lambda: window.status_panel.fields["mode"].text() == "IDLE", timeout=5000)
     qtbot.waitUntil(lambda: "frames/s" in window.connection.health.text(), timeout=5000)
+    # the bar names the testbed the simulator runs (the default one here)
+    assert window.connection.testbed.currentText().endswith("relative_2dof.toml")
     assert "dropped" in window.connection.health.text()
     assert "HIGH_RATE" in window.connection.health.toolTip()       # the full line per packet
     assert window.minimumSizeHint().width() < 1400                  # the text never widens the window
