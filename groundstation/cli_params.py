@@ -20,6 +20,7 @@ import argparse
 import sys
 
 from .errors import GroundStationError
+from .params.loop import report_lines
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
 
@@ -241,42 +242,3 @@ def _cmd_rollback(args) -> int:
     except GroundStationError as exc:
         return _fail(str(exc))
     return EXIT_OK
-
-
-def report_lines(design, report) -> list[str]:
-    """The validation report as text (also what a log or a dialog can show)."""
-    tb = design.testbed
-    out = [f"design:   {design.name} ({design.path})",
-           f"mode:     {design.mode} on {tb.name} ({tb.path.name})"]
-    for note in design.notes:
-        out.append(f"note:     {note}")
-    for name, tf in design.cascades.items():
-        integ = f", {report.integrators[name]} integrator(s)" if report.integrators.get(name) else ""
-        rows = report.sections.get(name)
-        out.append(f"{name}:       order {tf.order}{integ}, {rows} section(s): {tf.text()}")
-    m = report.match
-    if m is not None:
-        prewarp = f", pre-warped at {m.prewarp_hz:g} Hz" if m.prewarp_hz else ""
-        out.append(f"discrete: bilinear at {m.rate_hz:g} Hz{prewarp} (frequency warp "
-                   f"{m.warp_pct:.2f} % at {m.band_hz:g} Hz); worst below {m.band_hz:g} Hz:")
-        for name, r in {**m.cascades, **m.paths}.items():
-            out.append(f"          {name:<6} {r.text()}")
-        if m.closed_loop is not None:
-            out.append(f"          closed loop (sensitivity) {m.closed_loop.text()}")
-    if report.margins is not None:
-        out.append(f"margins:  loop broken at e: {report.margins.text()}")
-    if report.inner_margins is not None:
-        out.append(f"          rate loop alone: {report.inner_margins.text()}")
-    if report.outer_margins is not None:
-        out.append(f"          position loop (rate loop closed): {report.outer_margins.text()}")
-    if report.max_pole_radius is not None:
-        out.append(f"poles:    closed-loop max |z| = {report.max_pole_radius:.6f}; controller "
-                   f"max |z| = {report.controller_pole_radius:.6f} (integrators at z = 1 aside)")
-    for w in report.warnings:
-        out.append(f"warning:  {w}")
-    if report.ok:
-        out.append("OK: the table may be sent")
-    else:
-        out.append(f"REFUSED: {len(report.problems)} problem(s)")
-        out += [f"problem:  {p}" for p in report.problems]
-    return out

@@ -8,6 +8,7 @@ threads and answers with sig_params."""
 
 from __future__ import annotations
 
+import html
 import math
 from pathlib import Path
 from typing import Any
@@ -16,7 +17,7 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (QCheckBox, QFileDialog, QHBoxLayout, QLabel, QMessageBox,
-                               QProgressBar, QPushButton, QSplitter, QTreeWidget,
+                               QProgressBar, QPushButton, QSplitter, QTextBrowser, QTreeWidget,
                                QTreeWidgetItem, QVBoxLayout, QWidget)
 
 from ..dictionary import Dictionary, ParameterDef
@@ -24,7 +25,7 @@ from ..errors import GroundStationError
 from ..params import table as ptable
 from ..params.compare import three_way, wire_value
 from ..params.design import ControllerDesign, load_design, table_values
-from ..params.loop import ValidationReport, bode, validate
+from ..params.loop import ValidationReport, bode, report_lines, validate
 from .session import Session
 
 COLUMNS = ("Parameter", "Design / edited", "Last uploaded", "Device", "Units", "Range")
@@ -73,12 +74,18 @@ class ParameterPanel(QWidget):
         self.design_label.setWordWrap(True)
         self.result = QLabel("")
         self.result.setWordWrap(True)
+        self.result.setTextFormat(Qt.TextFormat.PlainText)
         self.result.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         self.progress = QProgressBar()
         self.progress.setRange(0, 100)
         self.progress.setVisible(False)
+        # the full validation report: scrollable, so a low dock still shows the table
+        self.report_view = QTextBrowser()
+        self.report_view.setMaximumHeight(120)
+        self.report_view.setVisible(False)
         lay.addWidget(self.design_label)
         lay.addWidget(self.result)
+        lay.addWidget(self.report_view)
         lay.addWidget(self.progress)
         # side by side: the panel usually lives in a wide, low bottom dock
         split = QSplitter(Qt.Orientation.Horizontal)
@@ -149,7 +156,12 @@ class ParameterPanel(QWidget):
             self._say(f"validation failed: {exc}", bad=True)
             return None
         self.report = report
-        self._say(_report_html(report), bad=not report.ok, html=True)
+        m = report.margins
+        head = "OK: the table may be sent" if report.ok else \
+            f"REFUSED: {'; '.join(report.problems)}"
+        self._say(head + (f" - {m.text()}" if m is not None else ""), bad=not report.ok)
+        self.report_view.setHtml(_report_html(self.design, report))
+        self.report_view.setVisible(True)
         self._plot_bode()
         return report
 
@@ -350,8 +362,7 @@ class ParameterPanel(QWidget):
         self.values = candidate
         return None
 
-    def _say(self, text: str, bad: bool = False, html: bool = False) -> None:
-        self.result.setTextFormat(Qt.TextFormat.RichText if html else Qt.TextFormat.PlainText)
+    def _say(self, text: str, bad: bool = False) -> None:
         self.result.setText(text)
         self.result.setStyleSheet(BAD_STYLE if bad else "")
 
@@ -366,20 +377,12 @@ def _element_text(v) -> str:
     return " ".join(f"{x:.6g}" for x in a)
 
 
-def _report_html(r: ValidationReport) -> str:
-    head = ("<span style='color:#2e7d32'><b>OK</b></span>" if r.ok else
-            "<span style='color:#c62828'><b>REFUSED</b></span>")
-    parts = [f"{head} {r.design} ({r.mode}, {r.testbed})"]
-    parts += [f"<span style='color:#c62828'>✗ {p}</span>" for p in r.problems]
-    parts += [f"<span style='color:#b26a00'>! {w}</span>" for w in r.warnings]
-    if r.margins is not None:
-        parts.append(f"loop at the error: {r.margins.text()}")
-    if r.inner_margins is not None:
-        parts.append(f"rate loop: {r.inner_margins.text()}")
-    if r.outer_margins is not None:
-        parts.append(f"position loop: {r.outer_margins.text()}")
-    if r.max_pole_radius is not None:
-        parts.append(f"closed-loop poles: largest |z| = {r.max_pole_radius:.6f}")
-    if r.match is not None:
-        parts.append(f"discretisation: {r.match.worst.text()}")
-    return "<br>".join(parts)
+def _report_html(design: ControllerDesign, r: ValidationReport) -> str:
+    """The CLI's report (params.loop.report_lines), coloured by what each line says."""
+    colours = {"problem:": "#c62828", "REFUSED:": "#c62828", "warning:": "#b26a00", "OK:": "#2e7d32"}
+    out = []
+    for line in report_lines(design, r):
+        text = html.escape(line)
+        colour = next((c for k, c in colours.items() if line.startswith(k)), None)
+        out.append(f"<span style='color:{colour}'><b>{text}</b></span>" if colour else text)
+    return "<pre style='margin:0'>" + "\n".join(out) + "</pre>"
