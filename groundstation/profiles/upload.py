@@ -217,6 +217,16 @@ class _Monitor:
             unsubscribe(self)
 
 
+def _explained(client, error: type[ProfileError], name: str, args: dict[str, Any]):
+    """client.command(name, **args); a refusal or failure becomes `error` with what the
+    device's reason means for the operator."""
+    try:
+        return client.command(name, **args)
+    except (CommandRejected, CommandFailed) as exc:
+        advice = _REASON_ADVICE.get(getattr(exc, "reason", ""), "")
+        raise error(f"{exc}" + (f": {advice}" if advice else "")) from exc
+
+
 class ProfileLoader:
     """Uploads profiles through a DeviceClient and confirms them on the device."""
 
@@ -284,11 +294,7 @@ class ProfileLoader:
         return record
 
     def _command(self, name: str, **args: Any):
-        try:
-            return self.client.command(name, **args)
-        except (CommandRejected, CommandFailed) as exc:
-            advice = _REASON_ADVICE.get(getattr(exc, "reason", ""), "")
-            raise ProfileUploadError(f"{exc}" + (f": {advice}" if advice else "")) from exc
+        return _explained(self.client, ProfileUploadError, name, args)
 
 
 class ProfilePlayer:
@@ -471,8 +477,4 @@ class ProfilePlayer:
             raise
 
     def _command(self, name: str, **args: Any):
-        try:
-            return self.client.command(name, **args)
-        except (CommandRejected, CommandFailed) as exc:
-            advice = _REASON_ADVICE.get(getattr(exc, "reason", ""), "")
-            raise PlaybackError(f"{exc}" + (f": {advice}" if advice else "")) from exc
+        return _explained(self.client, PlaybackError, name, args)
