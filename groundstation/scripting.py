@@ -104,8 +104,59 @@ class Testbed:
         self._recording_t0 = 0.0
         self._fg_server = None
         self._sim = None             # SimulatorProcess (real-time simulation)
+        #: attach(): the client belongs to someone else (the GUI's session) - close() leaves
+        #: it open; likewise a generator driver passed in is not ours to close
+        self._attached = False
+        self._owns_generator = True
+        # abort() runs make_safe on the caller's thread while the script's own thread may
+        # be making safe after its step failed: one at a time, or both would close the
+        # same recording
+        self._safe_lock = threading.RLock()
 
     # ------------------------------------------------------------------ session
+    @classmethod
+    def attach(cls, client, *, testbed: str | Path | None = None, generator=None,
+               log_folder: str | Path = "logs", history=None,
+               operator: Callable[[str], bool] | None = None,
+               echo: Callable[[str], None] | None = None) -> "Testbed":
+        """A session on a connection that is already open and owned by someone else (the
+        GUI's, whose charts then show the script live).  `client` is a connected
+        DeviceClient; time is wall time (a real-time device).  `generator` is None, a
+        VISA resource (opened here, closed by close()) or an open FunctionGenerator4050
+        (used, never closed here).  `history` a folder or a ParameterHistory.
+
+        make_safe()/abort() act as always (ABORT on the shared link, generator outputs
+        off, this session's recording closed); close() closes only what the session
+        opened itself - the client stays open, with this session's subscriptions removed."""
+        if client is None or client.link_state != "up":
+            raise ScriptError("attach: the link is not up - connect to the device first")
+        shared_history = isinstance(history, ParameterHistory)
+        tb = cls("attached", testbed=testbed, generator=None, log_folder=log_folder,
+                 history=None if shared_history else history, operator=operator, echo=echo)
+        if shared_history:
+            tb.history = history
+        tb._attached = True
+        tb.d = client.dictionary           # the link's own dictionary: the same protocol
+        tb.client = client
+        client.subscribe(tb.state)
+        tb.clock = WallClock(client, tb.abort_event)
+        if isinstance(generator, str):
+            from .instruments.fg4050 import open_generator
+            try:
+                tb.generator = open_generator(generator, testbed=tb.testbed)
+            except BaseException:
+                client.unsubscribe(tb.state)
+                raise
+        elif generator is not None:
+            tb.generator, tb._owns_generator = generator, False
+        tb.echo("attached to the open link" + (f", generator {tb.generator.resource_name}"
+                                                 if tb.generator is not None else ""))
+        return tb
+
+    @property
+    def attached(self) -> bool:
+        return self._attached
+
     def __enter__(self) -> "Testbed":
         self.open()
         return self
@@ -117,6 +168,8 @@ class Testbed:
             self.close()
 
     def open(self) -> None:
+        if self._attached:                 # attach() did the opening
+            return
         resource = None
         want_fg = (self.generator_spec == "auto" and self.testbed.inertial) or self.generator_spec == "sim"
         if self.device_spec == "sim":
@@ -163,6 +216,10 @@ class Testbed:
 
     def make_safe(self, reason: str = "") -> None:
         """ABORT the device, generator outputs off, recording closed.  Never raises."""
+        with self._safe_lock:
+            self._make_safe(reason)
+
+    def _make_safe(self, reason: str) -> None:
         if self.client is not None and self.client.link_state == "up":
             try:
                 self.client.command("ABORT")
@@ -411,7 +468,7 @@ class Testbed:
 
     def _close_generator(self) -> None:
         gen, self.generator = self.generator, None
-        if gen is not None:
+        if gen is not None and self._owns_generator:
             gen.close()
         server, self._fg_server = self._fg_server, None
         if server is not None:
@@ -423,7 +480,9 @@ class Testbed:
 
     def _close_client(self) -> None:
         client, self.client = self.client, None
-        if client is not None:
+        if client is not None and self._attached:
+            client.unsubscribe(self.state)     # the owner's link goes on without us
+        elif client is not None:
             client.close()
 
     def _stop_sim(self) -> None:

@@ -7,13 +7,16 @@ from pathlib import Path
 
 from PySide6.QtCore import QByteArray, QSettings, Qt
 from PySide6.QtGui import QAction, QKeySequence, QShortcut
-from PySide6.QtWidgets import QDockWidget, QFileDialog, QLabel, QMainWindow, QMessageBox, QToolBar
+from PySide6.QtWidgets import (QDockWidget, QFileDialog, QLabel, QMainWindow, QMessageBox,
+                               QPushButton, QToolBar)
 
 from ..sim.testbed import TESTBEDS_DIR
+from .campaign_panel import CampaignPanel
 from .channel_tree import ChannelTree
 from .charts import StripChartPanel
 from .fg_panel import GeneratorPanel
 from .params_panel import ParameterPanel
+from .profile_panel import ProfilePanel
 from .panels import CommandPanel, ConnectionBar, EventLog, RecordingPanel, ReplayBar, StatusPanel
 from .session import Session
 from .spectrum import SpectrumView
@@ -58,6 +61,10 @@ class MainWindow(QMainWindow):
         self.spectrum = SpectrumView(session.store, d)
         self.parameters = ParameterPanel(session, d)
         self.generator = GeneratorPanel(session)
+        self.profiles = ProfilePanel(session)
+        self.profiles.sig_abort.connect(self.abort)
+        self.campaign = CampaignPanel(session)
+        self.campaign.sig_abort.connect(self.abort)
         self.docks = {}
         for name, widget, area in (("Channels", self.tree, Qt.DockWidgetArea.LeftDockWidgetArea),
                                    ("Commands", self.commands, Qt.DockWidgetArea.RightDockWidgetArea),
@@ -66,7 +73,9 @@ class MainWindow(QMainWindow):
                                    ("Events", self.events, Qt.DockWidgetArea.BottomDockWidgetArea),
                                    ("Spectrum", self.spectrum, Qt.DockWidgetArea.BottomDockWidgetArea),
                                    ("Parameters", self.parameters, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Generator", self.generator, Qt.DockWidgetArea.BottomDockWidgetArea)):
+                                   ("Generator", self.generator, Qt.DockWidgetArea.BottomDockWidgetArea),
+                                   ("Profiles", self.profiles, Qt.DockWidgetArea.BottomDockWidgetArea),
+                                   ("Campaign", self.campaign, Qt.DockWidgetArea.BottomDockWidgetArea)):
             dock = QDockWidget(name)
             dock.setObjectName(name.lower().replace(" ", "_"))
             dock.setWidget(widget)
@@ -75,12 +84,19 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.docks["Events"], self.docks["Spectrum"])
         self.tabifyDockWidget(self.docks["Events"], self.docks["Parameters"])
         self.tabifyDockWidget(self.docks["Events"], self.docks["Generator"])
+        self.tabifyDockWidget(self.docks["Events"], self.docks["Profiles"])
+        self.tabifyDockWidget(self.docks["Events"], self.docks["Campaign"])
         self.docks["Events"].raise_()
 
         self.link_label = QLabel("not connected")
         self.statusBar().addPermanentWidget(self.link_label)
         session.sig_link_state.connect(lambda s, m: self.link_label.setText(f"link {s} {m}".strip()))
         session.sig_source.connect(self._source_changed)
+        # while a campaign runs it owns the device: the manual controls that would fight
+        # it are off (ABORT never is)
+        session.campaign.sig_started.connect(lambda *_: self._campaign_running(True))
+        session.campaign.sig_finished.connect(lambda *_: self._campaign_running(False))
+        session.campaign.sig_failed.connect(lambda *_: self._campaign_running(False))
         self._menus()
         # Abort: one key from anywhere in the application, whatever has the focus
         self.abort_shortcut = QShortcut(QKeySequence(Qt.Key.Key_Escape), self)
@@ -116,6 +132,9 @@ class MainWindow(QMainWindow):
         action(m, "&Upload parameter table...", self.parameters.upload, "Ctrl+U")
         action(m, "Read &back parameter table", self.session.params_read)
         action(m, "Roll back parameter table...", self.parameters.rollback)
+        m.addSeparator()
+        action(m, "Play &profile...", self._play_profile_dialog, "Ctrl+P")
+        action(m, "Run &campaign...", self._run_campaign_dialog, "Ctrl+K")
         m = self.menuBar().addMenu("&View")
         action(m, "&Pause charts", lambda: self.charts.set_paused(not self.charts.paused), "Ctrl+Space")
         for dock in self.docks.values():
@@ -133,8 +152,31 @@ class MainWindow(QMainWindow):
         self.docks["Parameters"].raise_()
         self.parameters.load_design_dialog()
 
+    def _show_dock(self, name: str) -> None:
+        self.docks[name].show()
+        self.docks[name].raise_()
+
+    def _play_profile_dialog(self) -> None:
+        self._show_dock("Profiles")
+        self.profiles.load_dialog()
+
+    def _run_campaign_dialog(self) -> None:
+        self._show_dock("Campaign")
+        self.campaign.load_dialog()
+
+    def _campaign_running(self, running: bool) -> None:
+        for button in self.commands.findChildren(QPushButton):
+            if button is not self.commands.abort_button:
+                button.setEnabled(not running)
+        for w in (self.commands.mode, self.commands.friction, self.parameters, self.generator):
+            w.setEnabled(not running)
+        if running:
+            self._show_dock("Campaign")
+
     def abort(self) -> None:
-        self.session.abort()                  # the device's ABORT and the generator's outputs off
+        # the device's ABORT, the generator's outputs off, a running campaign stopped
+        # (its Testbed.abort) and a playing profile's wait ended
+        self.session.abort()
         self.statusBar().showMessage("ABORT sent; function generator outputs off", 3000)
 
     def open_log_dialog(self) -> None:

@@ -1,6 +1,7 @@
 """The GUI's session controller: owns the link (or the replay), the simulator child
-process (with its function generator), the recorder and the function-generator
-controller, and turns their thread callbacks into Qt signals.
+process (with its function generator), the recorder, the function-generator controller
+and the campaign controller (campaigns run on this session's link), plays command
+profiles, and turns their thread callbacks into Qt signals.
 
 Widgets never touch a socket or a file: they call this object's methods, which run
 anything that can block (connecting, commands, opening a log) on worker threads, and
@@ -24,13 +25,22 @@ from ..logs import Recorder, ReplaySource
 from ..logs.live import attach_recorder
 from ..monitor import LimitMonitor
 from ..params.upload import ParameterHistory, ParameterLoader
+from ..profiles import Profile, ProfilePlayer
 from ..sim.process import SimulatorProcess
 from ..stream import TelemetryStore
+from .campaign_runner import CampaignController
 from .generator import GeneratorController
 
 log = logging.getLogger(__name__)
 
 RECONNECT_DELAYS_S = (1.0, 2.0, 4.0, 8.0, 10.0)
+#: after an abort, how long a playing profile may take to show its end in the telemetry
+#: before the player stops waiting and makes the device safe itself
+PROFILE_ABORT_GRACE_S = 1.0
+
+
+class ProfileAborted(GroundStationError):
+    """The operator aborted a profile that was being uploaded or played."""
 
 
 class Session(QObject):
@@ -42,6 +52,10 @@ class Session(QObject):
     #: parameter table work: ("active", ActiveTable) after a read, ("uploaded", UploadRecord),
     #: ("progress", (step, fraction)), ("failed", message)
     sig_params = Signal(str, object)
+    #: profile playback: ("step", text), ("upload", fraction), ("progress", (played, count)),
+    #: then once ("done", (status, text, PlaybackResult or None)) with status "completed",
+    #: "ended early", "aborted" or "failed"
+    sig_profile = Signal(str, object)
 
     def __init__(self, dictionary: Dictionary, store_seconds: float = 600.0, parent=None,
                  param_history: str | Path | None = None):
@@ -79,6 +93,15 @@ class Session(QObject):
         self.generator.sig_refused.connect(
             lambda setting, text: self.sig_event.emit("WARNING", "generator", f"refused: {text}"))
         self.generator.sig_info.connect(lambda text: self.sig_event.emit("INFO", "generator", text))
+        self._playing = False
+        self._play_abort = threading.Event()
+        #: campaigns on this session's link (Abort, disconnecting and closing stop them)
+        self.campaign = CampaignController(self, parent=self)
+        self.campaign.sig_log.connect(lambda text: self.sig_event.emit("INFO", "campaign", text))
+        self.campaign.sig_failed.connect(lambda text: self.sig_event.emit("ERROR", "campaign", text))
+        self.campaign.sig_finished.connect(lambda outcome: self.sig_event.emit(
+            "INFO" if outcome.report.status == "completed" else "WARNING", "campaign",
+            outcome.report.summary().splitlines()[0]))
 
     # ------------------------------------------------------------------ sources
     @property
@@ -154,6 +177,8 @@ class Session(QObject):
     def disconnect_link(self) -> None:
         """Close the session (the device disarms), switch the generator's outputs off
         and stop the simulator child."""
+        self._play_abort.set()
+        self.campaign.abort()                       # its rig made safe while the link is up
         self.generator.abort()
         self._want_connected = False
         self._reconnect.stop()
@@ -171,8 +196,13 @@ class Session(QObject):
         closed, simulator stopped.  Signals are blocked first: the widgets they would
         reach are being torn down."""
         self.blockSignals(True)
+        self.campaign.blockSignals(True)
         self._closing = True
-        self.generator.shutdown()                   # first: while the simulator still answers
+        self._play_abort.set()
+        # first: a campaign makes the rig safe (its generator session too) while the link
+        # and the simulator still answer
+        self.campaign.stop()
+        self.generator.shutdown()                   # while the simulator still answers
         self.stop_recording()
         self._want_connected = False
         self._reconnect.stop()
@@ -256,7 +286,11 @@ class Session(QObject):
     def abort(self) -> None:
         """ABORT now, whatever the state: the generator's outputs off (fail safe, even
         with no device connected) and the device's ABORT; reported as an event if the
-        latter cannot be sent."""
+        latter cannot be sent.  A running campaign stops at once (its Testbed.abort: the
+        generator session it holds off, its recording closed); a playing profile's wait
+        ends and reports "aborted"."""
+        self._play_abort.set()
+        self.campaign.abort()
         self.generator.abort()
         client = self.client
         if client is None:
@@ -320,6 +354,86 @@ class Session(QObject):
 
     def _param_progress(self, step: str, fraction: float) -> None:
         self.sig_params.emit("progress", (step, fraction))
+
+    # ------------------------------------------------------------------ profiles
+    @property
+    def profile_playing(self) -> bool:
+        return self._playing
+
+    def play_profile(self, profile: Profile, mode: str | None = None) -> str | None:
+        """Upload (verified), arm, play to the end and disarm a profile on a worker thread,
+        journaled into the recording if one runs.  Returns why not (nothing sent), else
+        None; progress and the outcome arrive as sig_profile.  Abort ends it at once."""
+        client = self.client
+        if self.replay is not None or client is None or client.link_state != "up":
+            return "not connected: connect to the device first"
+        if self._playing:
+            return "a profile is already playing"
+        if self.campaign.running:
+            return "a campaign is running: it owns the device until it ends"
+        self._playing = True
+        self._play_abort.clear()
+        self.sig_event.emit("INFO", "profile", f"playing {profile.name} ({profile.duration:g} s, "
+                                               f"{profile.target}) in {mode or 'its default mode'}")
+
+        def emit(kind: str, payload) -> None:
+            self.sig_profile.emit(kind, payload)
+
+        aborted_at: list[float] = []
+
+        def check_abort() -> None:
+            if self._play_abort.is_set():
+                raise ProfileAborted(f"{profile.name}: aborted by the operator before playback "
+                                     f"started; the device was made safe")
+
+        def on_step(text: str) -> None:
+            check_abort()                   # between upload, mode, arm and start
+            emit("step", text)
+
+        def progress(played: int, count: int) -> None:
+            emit("progress", (played, count))
+            if self._play_abort.is_set():
+                # the device's ABORT ends playback within a period, and the player sees it
+                # in the telemetry; should that not come, stop waiting and make safe here
+                if not aborted_at:
+                    aborted_at.append(time.monotonic())
+                elif time.monotonic() - aborted_at[0] > PROFILE_ABORT_GRACE_S:
+                    raise ProfileAborted(f"{profile.name}: aborted by the operator after {played} "
+                                         f"of {count} samples; the device was made safe")
+
+        def work() -> None:
+            player = ProfilePlayer(client, self.d, journal=self._journal)
+            outcome: tuple[str, str, object]
+            try:
+                result = player.play(profile, mode, progress=progress, on_step=on_step,
+                                     upload_progress=lambda step, f: emit("upload", f))
+            except ProfileAborted as exc:
+                outcome = ("aborted", str(exc), None)
+            except GroundStationError as exc:
+                status = "aborted" if self._play_abort.is_set() else "failed"
+                outcome = (status, str(exc), None)
+            except Exception as exc:        # a bug: the player made the device safe; say so
+                log.exception("playing %s", profile.name)
+                outcome = ("failed", f"{type(exc).__name__}: {exc}", None)
+            else:
+                if result.completed:
+                    outcome = ("completed", result.text(), result)
+                elif self._play_abort.is_set():
+                    # the device ends an aborted profile "disarmed" (its first event):
+                    # the operator's abort is the cause
+                    outcome = ("aborted", f"aborted by the operator: {result.text()}", result)
+                else:
+                    outcome = ("ended early", result.text(), result)
+            finally:
+                player.close()
+                self._playing = False
+            status, text, _ = outcome
+            self.sig_event.emit("INFO" if status == "completed" else
+                                "WARNING" if status == "aborted" else "ERROR",
+                                "profile", f"{profile.name}: {status}: {text}")
+            emit("done", outcome)
+        self._worker(work, "gs-profile-play")
+        return None
 
     # ------------------------------------------------------------------ recording
     def start_recording(self, folder: str, test_name: str, notes: str = "") -> Path | None:
