@@ -26,7 +26,6 @@ from __future__ import annotations
 import logging
 import threading
 import time
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any, Callable
 
@@ -102,6 +101,7 @@ class Testbed:
         self._device = None          # in-process SimulatedDevice (fast)
         self._drops_at_start = 0
         self._recording_t0 = 0.0
+        self._detach_recorder: Callable[[], None] | None = None
         self._fg_server = None
         self._sim = None             # SimulatorProcess (real-time simulation)
         #: attach(): the client belongs to someone else (the GUI's session) - close() leaves
@@ -330,6 +330,8 @@ class Testbed:
         finally:
             player.close()
         if not result.completed:
+            if self.abort_event.is_set():          # ended by our own abort: say so
+                raise ScriptAborted(f"profile {prof.name}: aborted ({result.text()})")
             raise ScriptError(f"profile {prof.name}: {result.text()}")
         self.echo(f"profile {prof.name}: {count} samples played")
         return result
@@ -359,7 +361,7 @@ class Testbed:
                        testbed_text=tb.path.read_text(), testbed_name=tb.name,
                        testbed_path=str(tb.path))
         path = rec.start()
-        attach_recorder(self.client, rec)
+        self._detach_recorder = attach_recorder(self.client, rec)
         self.recorder = rec
         self._drops_at_start = self._link_drops()
         self._recording_t0 = time.monotonic()
@@ -380,7 +382,7 @@ class Testbed:
         if rec is None:
             raise ScriptError("stop_recording: nothing is recording")
         self.recorder = None
-        self.client.unsubscribe(rec)
+        self._detach()
         status = rec.stop()
         if status.state != "stopped":
             raise ScriptError(f"recording '{rec.test_name}' ended badly: {status.state} {status.error}")
@@ -459,12 +461,17 @@ class Testbed:
     def _stop_recorder_quietly(self) -> None:
         rec, self.recorder = self.recorder, None
         if rec is not None:
-            if self.client is not None:
-                self.client.unsubscribe(rec)
+            self._detach()
             status = rec.stop()
             self.recordings.append({"name": rec.test_name, "files": [str(p) for p in status.files],
                                     "frames": status.frames, "discarded_blocks": rec.discarded_blocks,
                                     "state": status.state})
+
+    def _detach(self) -> None:
+        """The recorder off the link: telemetry, command and link listeners."""
+        detach, self._detach_recorder = self._detach_recorder, None
+        if detach is not None:
+            detach()
 
     def _close_generator(self) -> None:
         gen, self.generator = self.generator, None

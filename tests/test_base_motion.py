@@ -14,7 +14,7 @@ import pytest
 from scipy import signal
 
 from conftest import wait_for
-from groundstation.basemotion import (BaseMotionError, BaseStageModel, PsdFileError, PsdTable,
+from groundstation.basemotion import (BaseMotionError, BaseStageModel, PsdFileError,
                                       check_base_motion, csp_curves, load_profile, load_psd,
                                       make_profile, parse_psd, synthesise_angle)
 from groundstation.cli import main

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from groundstation.instruments import (InstrumentError, InstrumentLimitError, InstrumentLinkError,
-                                       SafetyLimitError, SafetyLimits, list_resources,
+                                       SafetyLimitError, list_resources,
                                        open_generator)
 from groundstation.instruments import spec4050 as spec
 from groundstation.sim.scpi_fg import ScpiServer, SimulatedGenerator

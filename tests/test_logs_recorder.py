@@ -189,3 +189,15 @@ def test_a_full_queue_drops_to_disk_never_blocks_the_link(tmp_path, dictionary):
     status = rec.stop()
     assert status.discarded_blocks > 0
     assert elapsed < 1.0                             # generous: it is a few puts
+
+
+def test_a_recorder_detached_from_a_link_leaves_nothing_behind(dictionary, client, tmp_path):
+    """The GUI's link outlives many recordings: each must take its listeners with it."""
+    from groundstation.logs.live import attach_recorder
+    before = (len(client._subscribers), len(client._command_listeners), len(client._link_listeners))
+    detach = attach_recorder(client, Recorder(dictionary, tmp_path))
+    assert (len(client._subscribers), len(client._command_listeners),
+            len(client._link_listeners)) == tuple(n + 1 for n in before)
+    detach()
+    assert (len(client._subscribers), len(client._command_listeners),
+            len(client._link_listeners)) == before

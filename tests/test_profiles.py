@@ -605,3 +605,18 @@ def test_cli_play(live_device, tmp_path, capsys):
     code, out, err = run_cli(capsys, "profile", "play", str(tmp_path / "none.toml"), "--device", address)
     assert code == 2
     assert fw.accepted == accepted                                      # none of them sent anything
+
+
+def test_an_abort_is_named_as_the_cause_not_the_disarm_it_brings(client):
+    """The device reports DISARMED before ABORTED in the period of an ABORT; the reason a
+    playback ended is the abort."""
+    from groundstation.profiles.upload import _Monitor
+    monitor = _Monitor(client)
+    try:
+        monitor.since = 100
+        monitor.events = [(90, "FAULT"), (150, "DISARMED"), (150, "ABORTED"), (151, "MODE_CHANGED")]
+        assert monitor.end_event() == "ABORTED"
+        monitor.events = [(150, "DISARMED"), (160, "ABORTED")]
+        assert monitor.end_event() == "DISARMED"           # a disarm first is a disarm
+    finally:
+        monitor.close()

@@ -670,7 +670,6 @@ class GeneratorPanel(QWidget):
         self.check_text.setToolTip(result.text())
         self.check_text.setStyleSheet(OK_STYLE if result.ok else BAD_STYLE)
         self._plot_check(result)
-        c = result.check
         self._say(result.text(), bad=not result.ok)
         return result
 

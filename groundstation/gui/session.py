@@ -69,6 +69,7 @@ class Session(QObject):
         self.replay: ReplaySource | None = None
         self.sim: SimulatorProcess | None = None
         self.recorder: Recorder | None = None
+        self._detach_recorder = None           # undoes attach_recorder on the current link
         self.address: str = ""
         self.testbed: str | None = None
         self._sim_testbed: str | None = None       # the testbed the running simulator has
@@ -166,7 +167,7 @@ class Session(QObject):
                 return
             self.client = client
             if self.recorder is not None and self.recorder.state == "recording":
-                attach_recorder(client, self.recorder)   # a reconnect keeps recording
+                self._detach_recorder = attach_recorder(client, self.recorder)   # a reconnect keeps recording
             self._attempt = 0
             self.sig_source.emit("live", address)
             self.sig_link_state.emit("up", address)
@@ -450,7 +451,7 @@ class Session(QObject):
             return None
         self.recorder = rec
         if self.client is not None:
-            attach_recorder(self.client, rec)
+            self._detach_recorder = attach_recorder(self.client, rec)
         if notes:
             rec.note(notes)
         self.sig_recording.emit("recording", str(path))
@@ -461,6 +462,9 @@ class Session(QObject):
         if rec is None:
             return
         self.recorder = None
+        detach, self._detach_recorder = self._detach_recorder, None
+        if detach is not None:
+            detach()
         status = rec.stop()
         if status.state == "stopped":
             self.sig_recording.emit("stopped", f"{status.frames} frames in "

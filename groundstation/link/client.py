@@ -119,6 +119,14 @@ class DeviceClient:
         except ValueError:
             pass
 
+    def remove_link_listener(self, callback: Callable[[str, str], None]) -> None:
+        if callback in self._link_listeners:
+            self._link_listeners.remove(callback)
+
+    def remove_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
+        if callback in self._command_listeners:
+            self._command_listeners.remove(callback)
+
     def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
         """Call `callback(state, message)` on link state changes ('up', 'lost', 'closed')."""
         self._link_listeners.append(callback)

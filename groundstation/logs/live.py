@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import asdict
+from typing import Callable
 
 from ..link.client import CommandResult, DeviceClient
 from .recorder import Recorder
@@ -11,10 +12,11 @@ from .recorder import Recorder
 UNJOURNALED = {"HEARTBEAT"}
 
 
-def attach_recorder(client: DeviceClient, recorder: Recorder) -> None:
+def attach_recorder(client: DeviceClient, recorder: Recorder) -> Callable[[], None]:
     """Subscribe the recorder to the client's telemetry, journal every command and every
     link state change, and the link statistics once a second (drops and CRC errors with
-    their times)."""
+    their times).  Returns the function that undoes all of it: a long-lived link (the
+    GUI's) sees many recordings, and each must leave nothing behind."""
     if recorder.link_stats is None:
         recorder.link_stats = client.stats.snapshot
     client.subscribe(recorder)
@@ -26,6 +28,15 @@ def attach_recorder(client: DeviceClient, recorder: Recorder) -> None:
         record["final_stage"] = result.final_stage
         t = result.stages[0].host_time if result.stages else None
         recorder.record("command", record, at=t)
+
+    def journal_link(state: str, message: str) -> None:
+        recorder.record("event", {"source": "link", "state": state, "message": message})
+
     client.add_command_listener(journal_command)
-    client.add_link_listener(lambda state, message: recorder.record(
-        "event", {"source": "link", "state": state, "message": message}))
+    client.add_link_listener(journal_link)
+
+    def detach() -> None:
+        client.unsubscribe(recorder)
+        client.remove_command_listener(journal_command)
+        client.remove_link_listener(journal_link)
+    return detach

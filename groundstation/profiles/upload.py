@@ -64,6 +64,9 @@ _REASON_ADVICE = {
 _END_EVENTS = {"PROFILE_FINISHED": "finished", "PROFILE_STOPPED": "stopped",
                "DISARMED": "disarmed", "ABORTED": "aborted",
                "WATCHDOG_EXPIRED": "watchdog expired", "FAULT": "fault"}
+#: which of several ending events in one period names the cause (first wins)
+_END_PRIORITY = ("FAULT", "WATCHDOG_EXPIRED", "ABORTED", "PROFILE_STOPPED", "DISARMED",
+                 "PROFILE_FINISHED")
 
 
 class ProfileUploadError(ProfileError):
@@ -193,13 +196,19 @@ class _Monitor:
                 self._scan(*pair)
 
     def end_event(self) -> str | None:
-        """The first playback-ending event at or after the start tick."""
+        """The playback-ending event at or after the start tick: the first one's tick,
+        and of the events of that tick the most telling.  An ABORT disarms, and the device
+        reports DISARMED before ABORTED in the same period; the operator's abort is the
+        cause, the disarm its consequence."""
         if self.since is None:
             return None
-        for tick, name in self.events:
-            if tick >= self.since and name in _END_EVENTS:
-                return name
-        return None
+        ending = [(tick, name) for tick, name in self.events
+                  if tick >= self.since and name in _END_EVENTS]
+        if not ending:
+            return None
+        first = ending[0][0]
+        same_tick = [name for tick, name in ending if tick == first]
+        return min(same_tick, key=_END_PRIORITY.index)
 
     def wait(self, predicate: Callable[[], bool], timeout: float) -> bool:
         deadline = time.monotonic() + timeout
