@@ -29,6 +29,24 @@ _SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35 if sys.platform.startswit
 _TIMESPEC = struct.Struct("@qq")
 
 
+def listening_socket(host: str, port: int, what_to_do: str) -> socket.socket:
+    """A TCP server socket bound to host:port (0: any free port), listening, with a 0.1 s
+    accept timeout so its accept loop can notice a stop.  A port in use raises
+    PortInUseError ending with `what_to_do` (which option to change)."""
+    lst = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
+    lst.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+    try:
+        lst.bind((host, port))
+    except OSError as exc:
+        lst.close()
+        if exc.errno == errno.EADDRINUSE:
+            raise PortInUseError(f"TCP port {port} on {host} is already in use - {what_to_do}") from None
+        raise LinkError(f"cannot listen on {host}:{port} ({exc.strerror or exc})") from None
+    lst.listen(4)
+    lst.settimeout(0.1)
+    return lst
+
+
 class StreamTransport:
     """A bidirectional byte stream (template: subclasses implement _read/_write/_close)."""
 

@@ -8,7 +8,6 @@ command is executed between two control periods, never in the middle of one.
 
 from __future__ import annotations
 
-import errno
 import itertools
 import logging
 import socket
@@ -20,8 +19,8 @@ import numpy as np
 
 from ..codec import FrameCodec, StreamDeframer
 from ..dictionary import Dictionary, load_dictionary
-from ..errors import LinkError, LinkLostError, PortInUseError
-from ..link.transports import StreamTransport, TcpStream
+from ..errors import LinkLostError
+from ..link.transports import StreamTransport, TcpStream, listening_socket
 from .firmware import Firmware
 from .testbed import Testbed
 
@@ -86,19 +85,9 @@ class SimulatedDevice:
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> "SimulatedDevice":
-        lst = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        lst.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            lst.bind((self.host, self._requested_port))
-        except OSError as exc:
-            lst.close()
-            if exc.errno == errno.EADDRINUSE:
-                raise PortInUseError(f"TCP port {self._requested_port} on {self.host} is already "
-                                     f"in use - another simulator running? choose --tcp-port") from None
-            raise LinkError(f"cannot listen on {self.host}:{self._requested_port} ({exc.strerror})") from None
+        lst = listening_socket(self.host, self._requested_port,
+                               "another simulator running? choose --tcp-port")
         self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
-        lst.listen(4)
-        lst.settimeout(0.1)
         self._listener = lst
         self.tcp_port = lst.getsockname()[1]
         self._spawn(self._accept_loop, "sim-accept")

@@ -36,7 +36,6 @@ Output model (deterministic: time is the device's tick, never the wall clock):
 
 from __future__ import annotations
 
-import errno
 import logging
 import math
 import re
@@ -48,7 +47,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..errors import LinkError, PortInUseError
+from ..link.transports import listening_socket
 from ..instruments import spec4050 as spec
 
 log = logging.getLogger(__name__)
@@ -493,19 +492,8 @@ class ScpiServer:
         return f"TCPIP0::{self.host}::{self.port}::SOCKET"
 
     def start(self) -> "ScpiServer":
-        lst = socket.socket(socket.AF_INET, socket.SOCK_STREAM)
-        lst.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
-        try:
-            lst.bind((self.host, self._requested_port))
-        except OSError as exc:
-            lst.close()
-            if exc.errno == errno.EADDRINUSE:
-                raise PortInUseError(f"TCP port {self._requested_port} on {self.host} is already in "
-                                     f"use - choose another --fg-port (0: any free port)") from None
-            raise LinkError(f"cannot listen on {self.host}:{self._requested_port} "
-                            f"({exc.strerror})") from None
-        lst.listen(4)
-        lst.settimeout(0.1)
+        lst = listening_socket(self.host, self._requested_port,
+                               "choose another --fg-port (0: any free port)")
         self._listener = lst
         self.port = lst.getsockname()[1]
         self._spawn(self._accept_loop, "fg-accept")
