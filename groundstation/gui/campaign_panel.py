@@ -29,6 +29,7 @@ from ..campaign import Campaign, StepResult, load_campaign
 from ..errors import GroundStationError
 from ..sim.testbed import PROFILES_DIR
 from .campaign_runner import CampaignOutcome
+from .file_combo import select_file
 from .session import Session
 
 CAMPAIGNS_DIR = PROFILES_DIR / "campaigns"
@@ -220,15 +221,10 @@ class CampaignPanel(QWidget):
 
     def set_file(self, path: str | Path) -> bool:
         """Choose a campaign file (added to the list if needed) and load it."""
-        path = str(Path(path).resolve())
-        index = self.file.findData(path)
-        if index < 0:
-            self.file.addItem(Path(path).stem, path)
-            index = self.file.count() - 1
-        if index == self.file.currentIndex():
-            return self.load(path)
-        self.file.setCurrentIndex(index)               # loads it
-        return self.campaign is not None and self.path == Path(path)
+        path = Path(path).resolve()
+        if select_file(self.file, path):             # already current: no change signal
+            return self.load(str(path))
+        return self.campaign is not None and self.path == path
 
     def _file_chosen(self) -> None:
         path = self.file.currentData()

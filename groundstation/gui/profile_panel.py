@@ -29,6 +29,7 @@ from ..errors import GroundStationError
 from ..profiles import (TARGETS, Profile, ProfileCheck, ProfileSummary, check_profile,
                         default_mode, load_profile, preview, summarise)
 from ..profiles.profile import WAVEFORMS_DIR
+from .file_combo import select_file
 from .session import Session
 
 BAD_STYLE = "color:#c62828; font-weight:bold;"
@@ -238,16 +239,11 @@ class ProfilePanel(QWidget):
             self.set_file(path)
 
     def set_file(self, path: str | Path) -> bool:
-        """Choose a profile file (added to the list if it is not there) and load it."""
-        path = str(Path(path).resolve())
-        index = self.file.findData(path)
-        if index < 0:
-            self.file.addItem(Path(path).stem, path)
-            index = self.file.count() - 1
-        if index == self.file.currentIndex():
-            return self.load(path)
-        self.file.setCurrentIndex(index)             # loads it
-        return self.profile is not None and self.path == Path(path)
+        """Choose a profile file (added to the list if needed) and load it."""
+        path = Path(path).resolve()
+        if select_file(self.file, path):             # already current: no change signal
+            return self.load(str(path))
+        return self.profile is not None and self.path == path
 
     def _file_chosen(self) -> None:
         path = self.file.currentData()
