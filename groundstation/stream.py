@@ -18,7 +18,8 @@ import numpy as np
 
 from .codec import TelemetryBlock
 from .dictionary import Dictionary, PacketDef
-from .link.stats import SEQ_MOD, TickUnwrapper
+from .codec.sequence import SequenceTracker
+from .link.stats import TickUnwrapper
 
 #: device time going back by more than this between frames is a reboot, not reordering
 RESTART_BACKSTEP_S = 1.0
@@ -50,7 +51,7 @@ class PacketRing:
         self._head = 0                 # next write position
         self._count = 0                # valid samples (<= capacity)
         self.total_frames = 0
-        self._last_seq: int | None = None
+        self._sequence = SequenceTracker()
         self._unwrap = TickUnwrapper()
         self._gaps: list[tuple[float, int]] = []
         self._lock = threading.Lock()
@@ -94,18 +95,15 @@ class PacketRing:
     def _append_range(self, block: TelemetryBlock, a: int, b: int, dev: np.ndarray) -> None:
         """Store block rows a..b-1 (dev: their device times)."""
         n = b - a
-        seq = block.columns["sequence"][a:b].astype(np.int64)
-        prev = np.concatenate(([self._last_seq if self._last_seq is not None else seq[0] - 1], seq[:-1]))
-        step = (seq - prev) % SEQ_MOD
-        lost = np.flatnonzero((step > 1) & (step < SEQ_MOD // 2))
+        first = self._sequence.fed
+        gaps = self._sequence.feed(block.columns["sequence"][a:b])
         host_all = np.asarray(block.host_time, dtype=np.float64)
         host = np.broadcast_to(host_all, (len(block),))[a:b] if host_all.ndim == 0 else host_all[a:b]
         columns = {c: block.columns[c][a:b] for c in self.channels}
         with self._lock:
-            self._last_seq = int(seq[-1])
             self.total_frames += n
-            for i in lost.tolist():
-                self._gaps.append((float(dev[i]), int(step[i] - 1)))
+            for at, missing in zip(gaps.gap_index.tolist(), gaps.missing.tolist()):
+                self._gaps.append((float(dev[max(0, at - first)]), int(missing)))
             if len(self._gaps) > 10000:
                 del self._gaps[:-10000]
             if n >= self.capacity:                     # keep only the newest capacity
@@ -190,7 +188,7 @@ class PacketRing:
         with self._lock:
             self._head = self._count = 0
             self.total_frames = 0
-            self._last_seq = None
+            self._sequence = SequenceTracker()
             self._unwrap = TickUnwrapper()
             self._gaps.clear()
 

@@ -1,11 +1,13 @@
 """Link health as numbers: frame rates, dropped frames, errors, latency.
 
 Drops are counted from sequence gaps per packet (sequence numbers are per packet id
-and wrap at 2^32).  Latency needs the device clock on the host's timebase; the device
+and wrap at 2^32), by the one tracker the display buffers and the log reader also use
+(codec/sequence.py: a single wild sequence number is an outlier, not four billion drops).  Latency needs the device clock on the host's timebase; the device
 has no synchronised clock, so `ClockSync` estimates the offset from command round trips
 (each RESPONSE carries the device tick): offset = host time at the midpoint of the
 round trip minus tick/1200, taking the exchange with the shortest round trip, as NTP
-does.  Latency of a frame = arrival time - (tick/1200 + offset).
+does, and bounded by the frames themselves (ClockSync).  Latency of a frame = arrival
+time - (tick/1200 + offset).
 """
 
 from __future__ import annotations
@@ -18,17 +20,26 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..codec import FramingCounters, TelemetryBlock
-
-SEQ_MOD = 1 << 32
+from ..codec.sequence import SEQ_MOD, SequenceTracker
 
 
 class ClockSync:
-    """Device tick -> host time, from round trips of commands."""
+    """Device tick -> host time, from round trips of commands and from the frames.
 
-    def __init__(self, tick_rate_hz: float, window: int = 32):
+    Round trips give the offset to within half the shortest round trip.  That estimate
+    goes stale when the device clock runs at another rate than the host's (a crystal's
+    drift, a simulator at --speed 2, a device catching up after a stall) and latencies
+    would then read negative.  Every received frame also bounds the offset from above:
+    it cannot have arrived before it was sent, so offset <= arrival - tick/rate.  The
+    offset used is the smaller of the two, the bound taken over the last `bound_window_s`
+    of frames, so a latency is never negative and follows a drifting device clock."""
+
+    def __init__(self, tick_rate_hz: float, window: int = 32, bound_window_s: float = 10.0):
         self.tick_rate = tick_rate_hz
         self._samples: deque[tuple[float, float]] = deque(maxlen=window)  # (rtt, offset)
         self._tick_unwrap = TickUnwrapper()
+        self._bound_window = bound_window_s
+        self._bounds: deque[tuple[float, float]] = deque()    # (monotonic time, bound), increasing bound
 
     def observe(self, sent: float, received: float, device_tick: int) -> None:
         rtt = received - sent
@@ -36,11 +47,23 @@ class ClockSync:
         t_dev = (self._tick_unwrap.unwrap_scalar(device_tick) + 0.5) / self.tick_rate
         self._samples.append((rtt, sent + rtt / 2 - t_dev))
 
+    def bound(self, upper: float, now: float | None = None) -> None:
+        """Record that the offset is at most `upper` (from a frame's arrival time)."""
+        now = time.monotonic() if now is None else now
+        b = self._bounds
+        while b and b[-1][1] >= upper:      # a monotonic deque: its head is the window's minimum
+            b.pop()
+        b.append((now, upper))
+        while b[0][0] < now - self._bound_window:
+            b.popleft()
+
     @property
     def offset(self) -> float | None:
-        if not self._samples:
+        rtt_offset = min(self._samples)[1] if self._samples else None
+        frame_bound = self._bounds[0][1] if self._bounds else None
+        if rtt_offset is None:
             return None
-        return min(self._samples)[1]
+        return rtt_offset if frame_bound is None else min(rtt_offset, frame_bound)
 
     @property
     def best_rtt(self) -> float | None:
@@ -74,6 +97,7 @@ class PacketStats:
     frames: int = 0
     dropped: int = 0           # frames missing according to sequence gaps
     duplicates: int = 0        # repeated or out-of-order sequence numbers
+    outliers: int = 0          # single frames with a wild sequence number (not believed)
     last_sequence: int | None = None
     rate_hz: float = 0.0
 
@@ -108,6 +132,7 @@ class LinkStatistics:
         self._window = rate_window_s
         self._latency: deque[float] = deque(maxlen=2400)
         self._unwrap: dict[str, TickUnwrapper] = {}
+        self._sequences: dict[str, SequenceTracker] = {}
         self._gaps: deque[tuple[float, str, int]] = deque(maxlen=1000)
         self._framing_sources: list[FramingCounters] = []
         self._started = time.monotonic()
@@ -120,6 +145,7 @@ class LinkStatistics:
             self._arrivals.clear()
             self._latency.clear()
             self._unwrap.clear()
+            self._sequences.clear()
             self._gaps.clear()
             self._started = time.monotonic()
 
@@ -136,30 +162,32 @@ class LinkStatistics:
         n = len(block)
         if not n:
             return
-        seq = block.columns["sequence"].astype(np.int64)
         now = time.monotonic()
         with self._lock:
             ps = self._packets.setdefault(block.name, PacketStats())
-            prev = np.concatenate(([ps.last_sequence], seq[:-1])) if ps.last_sequence is not None \
-                else np.concatenate(([seq[0] - 1], seq[:-1]))
-            step = (seq - prev) % SEQ_MOD
-            gaps = step - 1
-            lost = (step > 1) & (step < SEQ_MOD // 2)
-            if lost.any():
-                ps.dropped += int(gaps[lost].sum())
-                host_t = block.host_time
-                for i in np.flatnonzero(lost)[:100]:
-                    self._gaps.append((float(host_t[i]), block.name, int(gaps[i])))
-            ps.duplicates += int(np.count_nonzero((step == 0) | (step >= SEQ_MOD // 2)))
+            tracker = self._sequences.setdefault(block.name, SequenceTracker())
+            first = tracker.fed
+            rep = tracker.feed(block.columns["sequence"])
+            if len(rep.missing):
+                ps.dropped += rep.dropped
+                host_t = np.broadcast_to(np.asarray(block.host_time, dtype=np.float64), (n,))
+                for at, missing in list(zip(rep.gap_index.tolist(), rep.missing.tolist()))[:100]:
+                    self._gaps.append((float(host_t[max(0, at - first)]), block.name, int(missing)))
+            ps.duplicates += rep.duplicates
+            ps.outliers += rep.outliers
             ps.frames += n
-            ps.last_sequence = int(seq[-1])
+            ps.last_sequence = int(block.columns["sequence"][-1])
             arr = self._arrivals.setdefault(block.name, deque())
             arr.append((now, n))
-            offset = self.clock.offset
-            if offset is not None and block.name != "RESPONSE":
+            if block.name != "RESPONSE":
                 ticks = self._unwrap.setdefault(block.name, TickUnwrapper()).unwrap(block.columns["tick"])
-                lat = block.host_time - (ticks / self._tick_rate + offset)
-                self._latency.extend(lat[-64:].tolist())
+                # A frame cannot arrive before the device sent it: arrival - tick/rate is an
+                # upper bound of the clock offset, kept over the last few seconds.
+                self.clock.bound(float(np.min(block.host_time - ticks / self._tick_rate)))
+                offset = self.clock.offset
+                if offset is not None:
+                    lat = block.host_time - (ticks / self._tick_rate + offset)
+                    self._latency.extend(np.atleast_1d(lat)[-64:].tolist())
 
     def snapshot(self) -> LinkSnapshot:
         now = time.monotonic()
@@ -170,7 +198,7 @@ class LinkStatistics:
                 while arr and arr[0][0] < now - self._window:
                     arr.popleft()
                 rate = sum(n for _, n in arr) / self._window
-                packets[name] = PacketStats(ps.frames, ps.dropped, ps.duplicates,
+                packets[name] = PacketStats(ps.frames, ps.dropped, ps.duplicates, ps.outliers,
                                             ps.last_sequence, rate)
             framing: dict[str, int] = {}
             for src in self._framing_sources:
