@@ -90,3 +90,8 @@ class DictionaryMismatchError(CommandRejected):
 
 class NotConnectedError(CommandError):
     """A command needs an open session and there is none."""
+
+
+class SessionEndedError(CommandRejected):
+    """The device ended this host's session (another host took it over): the message says
+    who took it and when."""

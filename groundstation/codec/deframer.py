@@ -174,10 +174,12 @@ class FrameScanner:
         for i in bad_idx[-self.counters.recent_errors.maxlen:]:
             off, v, p, ln = int(cand[i]), int(version[i]), int(pid[i]), int(length[i])
             if v != self._version:
-                self._remember(ProtocolVersionError(
+                err = ProtocolVersionError(
                     f"frame at stream offset +{off} is protocol version {v}; this ground "
                     f"station speaks version {self._version}"
-                    + (" - update the ground station" if v > self._version else "")))
+                    + (" - update the ground station" if v > self._version else ""))
+                err.version = v           # the sender's major version, for the link's message
+                self._remember(err)
             elif not self._known[p]:
                 self._remember(UnknownPacketError(
                     f"frame at stream offset +{off} has packet id 0x{p:02X}, which is not in "

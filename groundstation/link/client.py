@@ -11,9 +11,11 @@ from __future__ import annotations
 
 import logging
 import random
+import re
 import threading
 import time
 from dataclasses import dataclass, field
+from datetime import datetime
 from typing import Any, Callable
 
 from ..codec import DatagramDecoder, FrameCodec, StreamDeframer, TelemetryBlock
@@ -21,7 +23,8 @@ from ..codec.frames import decode_items, encode_items
 from ..dictionary import Dictionary
 from ..errors import (CommandArgumentError, CommandFailed, CommandRejected, CommandTimeout,
                       DictionaryMismatchError, EncodeError, GroundStationError, LinkLostError,
-                      NotConnectedError, ProtocolVersionError)
+                      NotConnectedError, ProtocolVersionError, SessionEndedError)
+from .intake import TelemetryIntake
 from .stats import LinkStatistics
 from .transports import StreamTransport, UdpReceiver
 
@@ -83,6 +86,10 @@ class DeviceClient:
         self._datagrams = DatagramDecoder(self.codec) if telemetry is not None else None
         if self._datagrams is not None:
             self.stats.add_framing_source(self._datagrams.counters)
+        # telemetry only from the device at the other end of the command link (SPEC §1.1)
+        self.intake = TelemetryIntake(dictionary, getattr(command_link, "peer", None)
+                                      if telemetry is not None else None)
+        self.stats.add_framing_source(self.intake.counters)
         self._subscribers: list[Callable[[TelemetryBlock], None]] = []
         self._link_listeners: list[Callable[[str, str], None]] = []
         self._command_listeners: list[Callable[[CommandResult], None]] = []
@@ -128,7 +135,9 @@ class DeviceClient:
             self._command_listeners.remove(callback)
 
     def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        """Call `callback(state, message)` on link state changes ('up', 'lost', 'closed')."""
+        """Call `callback(state, message)` on link state changes: 'up', 'lost', 'closed',
+        or 'ended' (the device ended this host's session: another host took it over;
+        the message says who and when)."""
         self._link_listeners.append(callback)
 
     def add_command_listener(self, callback: Callable[["CommandResult"], None]) -> None:
@@ -158,8 +167,8 @@ class DeviceClient:
             except Exception:  # a broken listener must not take the link down
                 log.exception("link listener failed")
 
-    def _dispatch(self, blocks: list[TelemetryBlock]) -> None:
-        for block in blocks:
+    def _dispatch(self, blocks: list[TelemetryBlock], path: str) -> None:
+        for block in self.intake.blocks(blocks, path):
             self.stats.update(block)
             if block.name == "RESPONSE":
                 self._on_responses(block)
@@ -183,19 +192,21 @@ class DeviceClient:
                     self._lost(str(exc))
                 return
             if data:
-                self._dispatch(self._stream.feed(data, time.time()))
+                self._dispatch(self._stream.feed(data, time.time()), "stream")
 
     def _read_datagrams(self) -> None:
         assert self.telemetry is not None and self._datagrams is not None
         while not self._stop.is_set():
             try:
-                datagrams, times = self.telemetry.receive(0.1, coalesce_s=self.telemetry_batch_s)
+                datagrams, times, sources = self.telemetry.receive_from(
+                    0.1, coalesce_s=self.telemetry_batch_s)
             except LinkLostError as exc:
                 if not self._stop.is_set():
                     self._lost(str(exc))
                 return
+            datagrams, times = self.intake.datagrams(datagrams, times, sources)
             if datagrams:
-                self._dispatch(self._datagrams.decode(datagrams, times))
+                self._dispatch(self._datagrams.decode(datagrams, times), "datagram")
 
     def _lost(self, message: str) -> None:
         log.error("link lost: %s", message)
@@ -243,7 +254,10 @@ class DeviceClient:
         cmd = self.dictionary.command(name)
         if cmd.needs_session and self.session_token is None:
             raise NotConnectedError(f"{name}: no session - connect first")
-        if self.link_state != "up":
+        # after the device ended our session the link still carries the commands anyone
+        # may send (ABORT, GET_INFO, CONNECT to take the session back)
+        usable = self.link_state == "up" or (self.link_state == "ended" and not cmd.needs_session)
+        if not usable:
             raise LinkLostError(f"{name}: link is {self.link_state}"
                                 + (f" ({self.link_error})" if self.link_error else ""))
         try:
@@ -280,9 +294,16 @@ class DeviceClient:
                 versions = [e for e in self.stats.recent_errors()
                             if isinstance(e, ProtocolVersionError)]
                 if versions:       # the device answers, but in another protocol version
+                    theirs = getattr(versions[-1], "version", "?")
+                    ours = self.dictionary.version_major
+                    advice = ("update the ground station" if isinstance(theirs, int) and theirs > ours
+                              else "update the firmware, or use the protocol/*.toml it was "
+                                   "built with (--protocol-dir)")
                     raise DictionaryMismatchError(
-                        f"{name}: the device answers in another protocol version - "
-                        f"{versions[-1]}", "DICTIONARY_MISMATCH")
+                        f"{name}: protocol version mismatch - the device answers in protocol "
+                        f"version {theirs}, this ground station speaks version {self.dictionary.version} "
+                        f"(dictionary hash {self.dictionary.hash:08x}); frames of the other "
+                        f"version cannot be read - {advice}", "DICTIONARY_MISMATCH")
                 raise CommandTimeout(
                     f"{name} (seq {seq}): no answer from the device after {result.retries} "
                     f"retries of {accept_timeout} s - is the link up?")
@@ -295,6 +316,9 @@ class DeviceClient:
                 raise p.error
             last = result.stages[-1]
             if last.stage == "REJECTED":
+                if (last.reason == "NOT_SESSION_OWNER" and cmd.needs_session and token
+                        and token == self.session_token):
+                    raise self._session_taken(name, p.reply_bytes)
                 raise self._rejection(cmd.name, seq, last.reason, p.reply_bytes)
             if last.stage == "FAILED":
                 raise CommandFailed(f"{name} (seq {seq}) failed on the device: {last.reason}",
@@ -310,6 +334,30 @@ class DeviceClient:
                     cb(result)
                 except Exception:
                     log.exception("command listener failed")
+
+    def _session_taken(self, name: str, data: bytes) -> SessionEndedError:
+        """Our token stopped working: another host took the session over (SPEC §7).  The
+        rejection's data names the new owner and the tick its session began."""
+        text = data.decode("utf-8", "replace").strip()
+        match = re.fullmatch(r"owner (\S+) since tick (\d+)", text)
+        if match:
+            who, tick = match.group(1), int(match.group(2))
+            offset = self.stats.clock.offset
+            when = (datetime.fromtimestamp(tick / self.dictionary.control_rate_hz + offset)
+                    .strftime("%H:%M:%S") if offset is not None else "?")
+            what = f"taken over by {who} at {when} (device tick {tick})"
+        elif text == "no session open":
+            what = "closed on the device (no session open any more)"
+        else:
+            what = f"ended by the device ({text or 'no details given'})"
+        message = (f"session {what}: this station no longer controls the rig; connect with "
+                   f"take-over to take it back")
+        self.session_token = None
+        self._session_stop.set()
+        if self.link_state == "up":
+            log.error("%s", message)
+            self._set_state("ended", message)
+        return SessionEndedError(f"{name}: {message}", "NOT_SESSION_OWNER", data)
 
     def _rejection(self, name: str, seq: int, reason: str, data: bytes) -> CommandRejected:
         if reason == "DICTIONARY_MISMATCH" and name == "CONNECT":
@@ -401,7 +449,7 @@ class DeviceClient:
         for t in self._threads:
             t.join(timeout=2.0)
         self._threads.clear()
-        if self.link_state != "lost":
+        if self.link_state not in ("lost", "ended"):     # keep the reason it ended
             self._set_state("closed", "")
 
     def __enter__(self) -> "DeviceClient":

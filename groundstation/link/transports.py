@@ -106,6 +106,10 @@ class TcpStream(StreamTransport):
                 raise LinkError(f"{self.name}: cannot connect ({exc.strerror or exc})") from None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock = sock
+        try:    # the device's address as the socket sees it: telemetry must come from it
+            self.peer: tuple[str, int] | None = tuple(sock.getpeername()[:2])
+        except OSError:
+            self.peer = None
 
     def _write(self, data: bytes) -> None:
         try:
@@ -207,18 +211,25 @@ class UdpReceiver:
         self.bytes_read = 0
         self.closed = False
 
-    def _recv(self) -> tuple[bytes, float]:
+    def _recv(self) -> tuple[bytes, float, tuple[str, int]]:
         if not self.kernel_timestamps:
-            return self._sock.recv(65536), time.time()
-        data, ancillary, _flags, _addr = self._sock.recvmsg(65536, 64)
+            data, addr = self._sock.recvfrom(65536)
+            return data, time.time(), addr
+        data, ancillary, _flags, addr = self._sock.recvmsg(65536, 64)
         for level, kind, raw in ancillary:
             if level == socket.SOL_SOCKET and kind == _SO_TIMESTAMPNS and len(raw) >= _TIMESPEC.size:
                 sec, nsec = _TIMESPEC.unpack_from(raw)
-                return data, sec + nsec * 1e-9
-        return data, time.time()
+                return data, sec + nsec * 1e-9, addr
+        return data, time.time(), addr
 
     def receive(self, timeout: float, max_datagrams: int = 512,
                 coalesce_s: float = 0.0) -> tuple[list[bytes], list[float]]:
+        """receive_from() without the senders' addresses."""
+        datagrams, times, _ = self.receive_from(timeout, max_datagrams, coalesce_s)
+        return datagrams, times
+
+    def receive_from(self, timeout: float, max_datagrams: int = 512, coalesce_s: float = 0.0
+                     ) -> tuple[list[bytes], list[float], list[tuple[str, int]]]:
         """Wait up to `timeout` s for one datagram, then drain what else is queued.
 
         coalesce_s > 0 waits that long after the first datagram before draining, so a
@@ -228,30 +239,33 @@ class UdpReceiver:
         kernel's, so batching does not change the measured latency."""
         out: list[bytes] = []
         times: list[float] = []
+        sources: list[tuple[str, int]] = []
         try:
             self._sock.settimeout(timeout)
-            data, when = self._recv()
+            data, when, addr = self._recv()
         except socket.timeout:
-            return out, times
+            return out, times, sources
         except OSError as exc:
             if self.closed:
-                return out, times
+                return out, times, sources
             raise LinkLostError(f"udp://{self.host}:{self.port}: receive failed ({exc})") from None
         out.append(data)
         times.append(when)
+        sources.append(addr)
         if coalesce_s > 0:
             time.sleep(coalesce_s)
         try:
             self._sock.setblocking(False)
             while len(out) < max_datagrams:
-                data, when = self._recv()
+                data, when, addr = self._recv()
                 out.append(data)
                 times.append(when)
+                sources.append(addr)
         except (BlockingIOError, OSError):
             pass                        # drained (or closed meanwhile: the next call says so)
         self.datagrams += len(out)
         self.bytes_read += sum(len(d) for d in out)
-        return out, times
+        return out, times, sources
 
     def close(self) -> None:
         self.closed = True

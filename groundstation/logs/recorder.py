@@ -11,11 +11,13 @@ the link and everything else go on.
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
 import multiprocessing as mp
 import queue
 import shutil
+import signal
 import tempfile
 import threading
 import time
@@ -116,6 +118,8 @@ class Recorder:
         self.state = "idle"
         self.error = ""
         self.discarded_blocks = 0
+        self.refused_blocks = 0        # blocks of packets a log does not hold (COMMAND)
+        self.stop_reason = ""
         self.files: list[Path] = []
         self.path: Path | None = None
         self._frames_closed = 0        # frames in files already rolled over
@@ -147,7 +151,8 @@ class Recorder:
         self._proc = ctx.Process(target=writer_main, name="gs-log-writer", daemon=True,
                                  args=(self._inbox, self._outbox, str(self._protocol_dir()),
                                        {**self.config, "path": str(path), "run": run}))
-        self._proc.start()
+        with _terminal_interrupt_ignored():     # the child starts with SIGINT ignored
+            self._proc.start()
         deadline = time.monotonic() + timeout
         while True:
             try:
@@ -191,6 +196,11 @@ class Recorder:
         """Subscriber entry point: never blocks, never raises."""
         if self.state != "recording" or not len(block):
             return
+        if block.packet.direction != "device_to_host":
+            # a host-to-device packet (COMMAND) has no place in the log: the link should
+            # never pass one on, and if it does the writer must not fall over it
+            self.refused_blocks += 1
+            return
         if block.raw is not None:
             data: Any = block.raw.tobytes()
         else:
@@ -217,11 +227,15 @@ class Recorder:
     def note(self, text: str) -> None:
         self.record("note", {"text": text})
 
-    def stop(self, timeout: float = 30.0) -> RecorderStatus:
-        """Write what is queued, close the file cleanly, return the final status."""
+    def stop(self, timeout: float = 30.0, reason: str = "") -> RecorderStatus:
+        """Write what is queued, close the file cleanly, return the final status.
+
+        `reason` (e.g. "interrupted by the operator (Ctrl-C)", "session taken over by
+        ...") goes into the log's closing journal record, so the file says why it ends."""
         if self.state == "recording":
+            self.stop_reason = reason
             try:
-                self._inbox.put(("stop",), timeout=timeout)
+                self._inbox.put(("stop", reason), timeout=timeout)
             except queue.Full:
                 pass
             self._stopped.wait(timeout)
@@ -299,6 +313,22 @@ class Recorder:
         self._stopped.set()
         if self.on_failure is not None:
             self.on_failure(self.error)
+
+
+@contextlib.contextmanager
+def _terminal_interrupt_ignored():
+    """Ignore SIGINT while the writer process is spawned, so that it inherits "ignored"
+    from its very first instruction (the writer also ignores it itself, but only once
+    its imports are done).  Only the main thread can change signal handling; elsewhere
+    this does nothing."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def _link_record(snap) -> dict[str, Any]:

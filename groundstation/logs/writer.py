@@ -16,6 +16,7 @@ import os
 import queue
 import resource
 import shutil
+import signal
 import time
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,14 @@ from ..dictionary import load_dictionary
 from .h5file import LogFile
 
 
+def ignore_terminal_interrupt() -> None:
+    """SIGINT ignored in this process (and, inherited, in processes it spawns)."""
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:          # not the main thread of the process: nothing to do here
+        pass
+
+
 def _explain(exc: BaseException, path: Path) -> str:
     from .recorder import explain_error
     return explain_error(exc, path)
@@ -34,6 +43,9 @@ def _explain(exc: BaseException, path: Path) -> str:
 
 def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> None:
     """Entry point of the writer process (multiprocessing 'spawn')."""
+    # Ctrl-C in a terminal reaches the whole process group.  The writer must not die of
+    # it: the parent decides how the recording ends and tells it to close ("stop").
+    ignore_terminal_interrupt()
     d = load_dictionary(protocol_dir)
     codec = FrameCodec(d)
     parent = os.getppid()
@@ -60,6 +72,7 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
     interval = config["flush_interval_s"]
     next_flush = time.monotonic() + interval
     stopping = False
+    stop_reason = ""
     while not stopping:
         try:
             msg = inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
@@ -77,14 +90,17 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
                     journal.append(msg[1:])
                 elif kind == "stop":
                     stopping = True
+                    stop_reason = msg[1] if len(msg) > 1 else ""
                     break
                 msg = inbox.get_nowait()
         except queue.Empty:
             pass
         except (EOFError, OSError):        # the parent went away: finish cleanly
             stopping = True
+            stop_reason = stop_reason or "the recording program's queue closed"
         if os.getppid() != parent:         # parent killed: keep what we have, close cleanly
             stopping = True
+            stop_reason = stop_reason or "the recording program ended without closing the log"
         if time.monotonic() < next_flush and not stopping:
             continue
         next_flush = time.monotonic() + interval
@@ -103,8 +119,10 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
         try:
             lf.append(blocks)
             if stopping:
-                journal.append((time.time(), "recorder", {"action": "stopped",
-                                                          "frames": lf.frames_written}, b""))
+                closing = {"action": "stopped", "frames": lf.frames_written}
+                if stop_reason:
+                    closing["reason"] = stop_reason
+                journal.append((time.time(), "recorder", closing, b""))
             lf.journal(journal)
             lf.flush()
             blocks, journal = [], []

@@ -19,9 +19,9 @@ import numpy as np
 
 from ..codec import FrameCodec, StreamDeframer
 from ..dictionary import Dictionary, load_dictionary
-from ..errors import LinkLostError
+from ..errors import LinkLostError, PortInUseError
 from ..link.transports import StreamTransport, TcpStream, listening_socket
-from .firmware import Firmware
+from .firmware import REJECTED, Firmware
 from .testbed import Testbed
 
 log = logging.getLogger(__name__)
@@ -85,11 +85,28 @@ class SimulatedDevice:
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> "SimulatedDevice":
-        lst = listening_socket(self.host, self._requested_port,
-                               "another simulator running? choose --tcp-port")
-        self._udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+        # Telemetry leaves from the command port's number (SPEC §1.1): the host accepts
+        # datagrams only from there.  With any free port asked for (0), a TCP port whose
+        # UDP twin is taken is given back and another one tried.
+        for attempt in range(20):
+            lst = listening_socket(self.host, self._requested_port,
+                                   "another simulator running? choose --tcp-port")
+            port = lst.getsockname()[1]
+            udp = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+            try:
+                udp.bind((self.host, port))
+                break
+            except OSError as exc:
+                udp.close()
+                lst.close()
+                if self._requested_port or attempt == 19:
+                    raise PortInUseError(
+                        f"UDP port {port} on {self.host} is in use ({exc.strerror or exc}); the "
+                        f"simulated testbed sends telemetry from its command port's number - "
+                        f"choose another --tcp-port") from None
+        self._udp = udp
         self._listener = lst
-        self.tcp_port = lst.getsockname()[1]
+        self.tcp_port = port
         self._spawn(self._accept_loop, "sim-accept")
         if self.pacing != "manual":
             self._spawn(self._tick_loop, "sim-ticks")
@@ -134,8 +151,12 @@ class SimulatedDevice:
     def attach_stream(self, transport: StreamTransport, peer_ip: str | None = None) -> int:
         """Serve commands (and telemetry, if the host asks for it there) on a stream."""
         conn = _Connection(next(self._ids), transport, peer_ip)
+        peer = getattr(transport, "peer", None)
         with self._lock:
             self._connections[conn.id] = conn
+            # how the firmware names this host to others (e.g. after a take-over)
+            self.firmware.peer_names[conn.id] = (f"{peer[0]}:{peer[1]}" if peer
+                                                 else f"{transport.name} link")
         conn.thread = self._spawn(lambda: self._serve(conn), f"sim-conn-{conn.id}")
         return conn.id
 
@@ -146,9 +167,12 @@ class SimulatedDevice:
                 data = conn.transport.read(0.1)
                 if not data:
                     continue
+                version_errors = deframer.counters.version_errors
                 for block in deframer.feed(data, time.time()):
                     if block.name == "COMMAND":
                         self._on_commands(conn, block)
+                if deframer.counters.version_errors != version_errors:
+                    self._answer_other_version_connect(conn, data)
         except LinkLostError as exc:
             log.info("connection %d closed: %s", conn.id, exc)
         finally:
@@ -156,6 +180,7 @@ class SimulatedDevice:
                 self._connections.pop(conn.id, None)
                 if self.firmware.session_peer == conn.id:
                     self.firmware.end_session("command connection closed")
+                self.firmware.peer_names.pop(conn.id, None)
             conn.transport.close()
 
     def _on_commands(self, conn: _Connection, block) -> None:
@@ -178,6 +203,33 @@ class SimulatedDevice:
             conn.send(b"".join(out))
         except LinkLostError:
             pass
+
+    def _answer_other_version_connect(self, conn: _Connection, data: bytes) -> None:
+        """SPEC §7: a CONNECT in another protocol major version is answered REJECTED
+        DICTIONARY_MISMATCH, in this device's own version, so the host can name both
+        versions instead of waiting for an answer that never comes.  (Header: sync 2,
+        version 1, packet id 1, length 2, sequence 4, tick 4; COMMAND payload: token 4,
+        opcode 2.)  A frame split across two reads is missed; the host's retry comes
+        whole."""
+        command_id = self.dictionary.packet("COMMAND").id
+        connect = self.dictionary.command("CONNECT").opcode
+        out = []
+        at = data.find(b"\xEB\x90")
+        while at >= 0 and at + 20 <= len(data):
+            if (data[at + 2] != self.dictionary.version_major and data[at + 3] == command_id
+                    and int.from_bytes(data[at + 18:at + 20], "big") == connect):
+                seq = int.from_bytes(data[at + 6:at + 10], "big")
+                with self._lock:
+                    out.append(self._frame("RESPONSE", {
+                        "command_sequence": seq, "opcode": connect, "stage": REJECTED,
+                        "reason": self.dictionary.error_codes["DICTIONARY_MISMATCH"],
+                        "data": self.firmware._connect_reply(0)}))
+            at = data.find(b"\xEB\x90", at + 2)
+        if out:
+            try:
+                conn.send(b"".join(out))
+            except LinkLostError:
+                pass
 
     def _frame(self, packet: str, values: dict[str, Any], tick: int | None = None) -> bytes:
         seq = self._seq[packet]

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
-import random
+import secrets
 import zlib
 from collections import OrderedDict, deque
 from dataclasses import dataclass, field
@@ -63,7 +63,10 @@ class Firmware:
         self.ev = dictionary.event_codes
         self.testbed = testbed or load_testbed()
         self.description = description or f"simulated testbed: {self.testbed.name} ({self.testbed.path.name})"
-        self._token_rng = random.Random(seed ^ 0x5EED)
+        #: connection id -> how that host is named in messages ("ip:port"), set by the
+        #: protocol endpoint that owns the connections
+        self.peer_names: dict[Any, str] = {}
+        self.session_since_tick = 0
         self.params = ptable.default_values(dictionary)
         self.param_blob = ptable.pack(dictionary, self.params)
         self.param_crc = ptable.table_crc(self.param_blob)
@@ -176,7 +179,7 @@ class Firmware:
             return [Stage(REJECTED, self._reason("BAD_LENGTH"))]    # whole f32 samples only
         if cmd.needs_session and (self.session_token is None or token != self.session_token):
             self._emit("WARNING", "COMMAND_REJECTED", f"{cmd.name} without the session token")
-            return [Stage(REJECTED, self._reason("NOT_SESSION_OWNER"))]
+            return [Stage(REJECTED, self._reason("NOT_SESSION_OWNER"), self._owner_text())]
         bad = self._range_problem(cmd, values)
         if bad:
             return [Stage(REJECTED, self._reason("OUT_OF_RANGE"))]
@@ -211,16 +214,27 @@ class Firmware:
         if self.session_token is not None and not v["take_over"] and peer != self.session_peer:
             return self._reject("SESSION_BUSY")
         if self.session_token is not None:
-            self._emit("WARNING", "SESSION_TAKEN_OVER", "session taken over by another host")
+            self._emit("WARNING", "SESSION_TAKEN_OVER",
+                       f"session taken over by {self.peer_names.get(peer, 'another host')}")
             self._safe_state()
-        self.session_token = self._token_rng.randrange(1, 1 << 32)
+        # unguessable whatever the seed: a token is the only proof of owning the session
+        self.session_token = secrets.randbelow((1 << 32) - 1) + 1
         self.session_peer = peer
+        self.session_since_tick = self.tick & 0xFFFFFFFF
         self.fw[core.FW_SESSION] = 1.0
         self.telemetry_port = v["telemetry_port"]
         self.fw[core.FW_LAST_HEARD] = self.tick
         self.watchdog_expired = False
-        self._emit("INFO", "SESSION_OPENED", f"session opened by {peer}")
+        self._emit("INFO", "SESSION_OPENED", f"session opened by {self.peer_names.get(peer, peer)}")
         return self._ok(self._connect_reply(self.session_token))
+
+    def _owner_text(self) -> bytes:
+        """REJECTED NOT_SESSION_OWNER's data (SPEC §7): who owns the session and since
+        which tick, so a host that lost it can say who took it and when."""
+        if self.session_token is None:
+            return b"no session open"
+        who = self.peer_names.get(self.session_peer, "another host")
+        return f"owner {who} since tick {self.session_since_tick}".encode()
 
     def end_session(self, why: str) -> None:
         """The session owner disconnected or its connection closed."""
