@@ -152,15 +152,13 @@ def _cmd_set(args) -> int:
         ch = args.channel
         wave = any(v is not None for v in (args.waveform, args.frequency, args.amplitude,
                                            args.offset, args.phase))
-        # every step is checked; order them so that the step in between is the smaller
-        # drive: to high impedance (half the real volts of a 50 ohm setting) first, to 50 last
-        if args.load == "HZ":
-            fg.set_load(ch, args.load)
-        if wave:
+        if wave or args.load is not None:
+            # one call: the new values are checked against the new load, and the driver
+            # sends the load and the wave in the order the instrument (and, with the output
+            # on, the stage) accepts
             fg.configure(ch, waveform=args.waveform, frequency_hz=args.frequency,
-                         amplitude_vpp=args.amplitude, offset_v=args.offset, phase_deg=args.phase)
-        if args.load == "50":
-            fg.set_load(ch, args.load)
+                         amplitude_vpp=args.amplitude, offset_v=args.offset, phase_deg=args.phase,
+                         load=args.load)
         print(fg.describe(ch), flush=True)
         if args.output == "on":
             _hold(fg, ch, args.hold)
@@ -459,6 +457,13 @@ def _non_negative(text: str) -> float:
     return value
 
 
+def _positive(text: str) -> float:
+    value = _non_negative(text)
+    if value < 0.001:
+        raise argparse.ArgumentTypeError(f"must be at least 0.001, not {text}")
+    return value
+
+
 def _fraction(text: str) -> float:
     value = _non_negative(text)
     if value >= 1:
@@ -484,7 +489,7 @@ def add_parsers(sub) -> None:
             p.add_argument("--testbed", default=None,
                            help="testbed file whose [limits] apply (default: "
                                 "profiles/testbeds/inertial_2dof.toml)")
-            p.add_argument("--timeout", type=float, default=5.0, help="VISA timeout, s")
+            p.add_argument("--timeout", type=_positive, default=5.0, help="VISA timeout, s")
 
     def channel(p):
         p.add_argument("--channel", type=int, choices=(1, 2), default=1)

@@ -9,7 +9,12 @@ so the driver is first of all a safety layer:
   naming the value, the limit and where the limit comes from, and nothing is sent;
 * the full basic-wave state of a channel is sent in one `BSWV` command (read, modify,
   check, send), so what was checked is exactly what the instrument gets, and amplitude
-  and offset are ordered so that no intermediate state leaves the envelope;
+  and offset are ordered so that no intermediate state leaves the envelope; a load
+  change made together with the wave is checked with the new load and sent in the order
+  whose state in between is allowed;
+* any failure of the I/O itself (VISA error, timeout, dropped link, a reply that is not
+  text, a backend that cannot take a message) raises `InstrumentLinkError` with one line
+  naming the command and what to check - never a backend's own exception;
 * after every setting the standard event status (`*ESR?`) is read and, on an error bit,
   the error queue (`SYST:ERR?`, where supported): an error raises `InstrumentError` with
   the instrument's own text;
@@ -18,7 +23,8 @@ so the driver is first of all a safety layer:
   resource is opened once more to switch them off; closing never raises.
 
 Backends: any pyvisa backend - "@py" (pyvisa-py, the default), "@ivi" (a vendor VISA
-where installed) or "file.yaml@sim" (pyvisa-sim, for tests).
+where installed) or "file.yaml@sim" (pyvisa-sim, for tests; it has no binary transfers,
+so arbitrary-waveform uploads through it are refused before anything is sent).
 """
 
 from __future__ import annotations
@@ -264,11 +270,40 @@ def _release_manager(rm) -> None:
         log.debug("closing the resource manager: %s", exc)
 
 
-def _visa_errors() -> tuple[type[BaseException], ...]:
+def _is_timeout(exc: BaseException) -> bool:
     import pyvisa
 
-    # pyvisa-py lets socket errors through on a dropped TCP link
-    return (pyvisa.errors.VisaIOError, pyvisa.errors.InvalidSession, OSError, EOFError)
+    return (isinstance(exc, pyvisa.errors.VisaIOError)
+            and exc.error_code == pyvisa.constants.StatusCode.error_timeout)
+
+
+def _io_failure(exc: BaseException, *, reading: bool, timeout_ms: int | None, backend: str) -> str:
+    """Why one VISA transaction failed, in one line that says what to do about it.
+
+    Anything a backend raises while a message goes out or a reply comes back is an I/O
+    failure to the driver: VISA errors, dropped sockets, and also a reply that is not text
+    (UnicodeDecodeError from pyvisa's decoding) or a message a backend could not take
+    (pyvisa-sim decodes every message it receives as UTF-8)."""
+    if _is_timeout(exc):
+        t = f"{timeout_ms / 1000:g} s" if timeout_ms else "the VISA timeout"
+        return (f"no answer within {t} (VISA timeout): check that the generator is on and "
+                f"connected and that this is its address (a slow instrument needs a longer "
+                f"--timeout)")
+    if isinstance(exc, UnicodeDecodeError):
+        bad = exc.object[exc.start:exc.start + 8]
+        if reading:
+            return (f"the reply is not text (byte {bad[:1]!r} at position {exc.start} cannot be "
+                    f"decoded as {exc.encoding}): the link is corrupting data, or another "
+                    f"program is talking to the instrument - check the cable and close other "
+                    f"VISA programs")
+        hint = (" - pyvisa-sim cannot carry binary data" if backend.endswith("@sim") else "")
+        return (f"the VISA backend {backend} could not take the message (it decodes it as "
+                f"{exc.encoding} and byte {bad[:1]!r} at position {exc.start} is not text){hint}")
+    if isinstance(exc, UnicodeEncodeError):
+        return f"the message is not ASCII text ({exc.reason} at position {exc.start})"
+    text = _brief(exc)
+    name = type(exc).__name__
+    return text if text.startswith(name) else f"{name}: {text}"
 
 
 # ---------------------------------------------------------------------------------- the link
@@ -421,18 +456,25 @@ class FunctionGenerator4050:
         if self._link.closed:
             raise InstrumentLinkError(f"{self.resource_name} is closed")
 
-    def _io_error(self, what: str, exc: BaseException) -> InstrumentLinkError:
-        return InstrumentLinkError(f"{self.resource_name}: {what} failed: "
-                                   f"{str(exc).strip() or type(exc).__name__}")
+    def _io_error(self, what: str, exc: BaseException, *, reading: bool = False
+                  ) -> InstrumentLinkError:
+        # the backend's traceback is for a developer (debug log), the line for the user
+        log.debug("%s: %s failed", self.resource_name, what, exc_info=exc)
+        why = _io_failure(exc, reading=reading, timeout_ms=self._link.timeout_ms,
+                          backend=self._link.backend)
+        return InstrumentLinkError(f"{self.resource_name}: {what} failed: {why}")
 
     def query(self, command: str) -> str:
-        """Send a query and return the reply line (no error check: replies are data)."""
+        """Send a query and return the reply line (no error check: replies are data).
+
+        Any failure of the exchange (VISA error, timeout, dropped link, a reply that is not
+        text) raises InstrumentLinkError naming the query and what to check."""
         self._require_open()
         with self._link.lock:
             try:
                 return self._link.inst.query(command).strip()
-            except _visa_errors() as exc:
-                raise self._io_error(f"query {command!r}", exc) from None
+            except Exception as exc:          # whatever the backend raised: an I/O failure
+                raise self._io_error(f"query {command!r}", exc, reading=True) from None
 
     def _write_checked(self, command: str, binary: np.ndarray | None = None) -> None:
         self._require_open()
@@ -443,8 +485,10 @@ class FunctionGenerator4050:
                 else:
                     self._link.inst.write_binary_values(command, binary, datatype="h",
                                                         is_big_endian=False, header_fmt="empty")
-            except _visa_errors() as exc:
-                raise self._io_error(f"sending {command!r}", exc) from None
+            except Exception as exc:          # whatever the backend raised: an I/O failure
+                what = (f"sending {_shorten(command)!r}" if binary is None else
+                        f"sending {_shorten(command)!r} with {2 * len(binary)} bytes of samples")
+                raise self._io_error(what, exc) from None
             self._check_errors(command)
 
     def _check_errors(self, command: str) -> None:
@@ -452,9 +496,13 @@ class FunctionGenerator4050:
         reply = self.query("*ESR?")
         try:
             esr = int(float(reply))
-        except ValueError:
+            if not 0 <= esr <= 255:
+                raise ValueError("not an 8-bit register")
+        except (ValueError, OverflowError):
             raise InstrumentError(f"{self.resource_name}: unexpected *ESR? reply {reply!r} "
-                                  f"after {command!r}") from None
+                                  f"after {_shorten(command)!r} (not a status register value); "
+                                  f"the setting may or may not have been taken - read the "
+                                  f"channel back before going on") from None
         bits = [name for bit, name in spec.ESR_ERROR_BITS.items() if esr & bit]
         if not bits:
             return
@@ -471,14 +519,18 @@ class FunctionGenerator4050:
             try:
                 with self._link.lock:
                     reply = self._link.inst.query(self._error_query).strip()
-            except _visa_errors() as exc:
+            except UnicodeDecodeError as exc:   # an answer, but not text: say so, stop
+                texts.append(f"(the {self._error_query} reply is not text: {exc.reason} at "
+                             f"byte {exc.start})")
+                break
+            except Exception as exc:
                 # no error query on this firmware: use the status bits from now on
                 log.info("%s: %s not answered (%s); reporting status bits only",
                          self.resource_name, self._error_query, exc)
                 self._error_query = None
                 try:
                     self._link.inst.write("*CLS")
-                except _visa_errors():
+                except Exception:
                     pass
                 break
             code = reply.split(",", 1)[0].strip()
@@ -499,14 +551,22 @@ class FunctionGenerator4050:
             raise InstrumentError(f"{self.resource_name}: {exc}") from None
 
     # ------------------------------------------------------------------ queries
+    def _read(self, parse, command: str):
+        """Query and parse; a reply that cannot be parsed names the instrument and query."""
+        reply = self.query(command)
+        try:
+            return parse(reply)
+        except InstrumentError as exc:
+            raise InstrumentError(f"{self.resource_name}: {command}: {exc}") from None
+
     def basic_wave(self, channel: int) -> BasicWave:
-        return BasicWave.parse(self.query(f"C{_channel(channel)}:BSWV?"))
+        return self._read(BasicWave.parse, f"C{_channel(channel)}:BSWV?")
 
     def output_state(self, channel: int) -> OutputState:
-        return OutputState.parse(self.query(f"C{_channel(channel)}:OUTP?"))
+        return self._read(OutputState.parse, f"C{_channel(channel)}:OUTP?")
 
     def arb_selection(self, channel: int) -> ArbSelection:
-        return ArbSelection.parse(self.query(f"C{_channel(channel)}:ARWV?"))
+        return self._read(ArbSelection.parse, f"C{_channel(channel)}:ARWV?")
 
     def get_waveform(self, channel: int) -> str:
         return self.basic_wave(channel).waveform
@@ -530,9 +590,13 @@ class FunctionGenerator4050:
         return self.output_state(channel).load
 
     # ------------------------------------------------------------------ checks
-    def check(self, channel: int, wave: BasicWave, load: str | None) -> None:
+    def check(self, channel: int, wave: BasicWave, load: str | None, *,
+              safety: bool = True) -> None:
         """Raise InstrumentLimitError / SafetyLimitError if `wave` into `load` is not
-        allowed; an unknown load is taken as 50 ohm (the one that doubles the real voltage)."""
+        allowed; an unknown load is taken as 50 ohm (the one that doubles the real voltage).
+        With safety=False only the instrument's own limits apply (a state in between two
+        commands while the output is off: the instrument must take it, the stage never
+        sees it)."""
         ch = _channel(channel)
         instrument = f"the {spec.MODEL} specification (groundstation/instruments/spec4050.py)"
         if wave.waveform not in spec.WAVEFORMS:
@@ -585,11 +649,11 @@ class FunctionGenerator4050:
             refuse(InstrumentLimitError, "envelope", abs(ofst) + amp / 2, emax, instrument,
                    f"|offset| + amplitude/2 = {abs(ofst) + amp / 2:g} V is beyond {emax:g} V into "
                    f"a {lname} load ({instrument})")
-        if self.limits is None:
+        if self.limits is None or not safety:
             return
         lim = self.limits
         note = ("" if load_known == "HZ" else
-                f" (the load is set to {'50 ohm' if load else 'an unknown value, taken as 50 ohm'}: "
+                f" (with the load at {'50 ohm' if load else 'an unknown value, taken as 50 ohm'}: "
                 f"into the high-impedance amplifier input the real voltage is twice the setting)")
         if "AMP" in needed:
             real = spec.volts_at_high_z(amp, load_known)
@@ -607,27 +671,90 @@ class FunctionGenerator4050:
     # ------------------------------------------------------------------ settings
     def configure(self, channel: int, *, waveform: str | None = None,
                   frequency_hz: float | None = None, amplitude_vpp: float | None = None,
-                  offset_v: float | None = None, phase_deg: float | None = None) -> BasicWave:
-        """Change any of the basic-wave settings: the resulting state is checked as a
-        whole and sent as one BSWV command; returns the state sent."""
+                  offset_v: float | None = None, phase_deg: float | None = None,
+                  load: str | int | None = None) -> BasicWave:
+        """Change any of the basic-wave settings and, with `load`, the load they refer to:
+        the resulting state is checked as a whole - the new values against the NEW load -
+        and the wave is sent as one BSWV command; returns the wave state sent.
+
+        When the load changes too, the two commands (BSWV and OUTP LOAD) go in the order
+        whose state in between is one the instrument accepts (an amplitude valid only into
+        high impedance needs the load first; one valid only at the old load, the wave
+        first) and, if the output is on, one the testbed's limits allow: the smaller
+        drive in between is preferred (to high impedance: load first; to 50 ohm: wave
+        first).  If no order works, nothing is sent."""
         ch = _channel(channel)
+        new_load = None if load is None else _load_setting(ch, load)
+        wave_given = any(v is not None for v in (waveform, frequency_hz, amplitude_vpp,
+                                                 offset_v, phase_deg))
         with self._link.lock:
             current = self.basic_wave(ch)
-            load = self.output_state(ch).load
-            # a value the instrument does not report for the current waveform (DC has no
-            # frequency or amplitude) stays None - "unknown", which check() refuses - rather
-            # than letting the instrument fall back on a value nobody checked
-            new = BasicWave(
-                (waveform or current.waveform).upper(),
-                float(frequency_hz) if frequency_hz is not None else current.frequency_hz,
-                float(amplitude_vpp) if amplitude_vpp is not None else current.amplitude_vpp,
-                float(offset_v) if offset_v is not None else (current.offset_v or 0.0),
-                float(phase_deg) if phase_deg is not None else (current.phase_deg or 0.0))
-            self.check(ch, new, load)
-            body = ",".join(f"{n},{v if isinstance(v, str) else spec.format_number(v)}"
-                            for n, v in new.command_pairs(current))
-            self._write_checked(f"C{ch}:BSWV {body}")
+            out = self.output_state(ch)
+            if wave_given or new_load is None:
+                # a value the instrument does not report for the current waveform (DC has
+                # no frequency or amplitude) stays None - "unknown", which check() refuses -
+                # rather than letting the instrument fall back on a value nobody checked
+                new = BasicWave(
+                    (waveform or current.waveform).upper(),
+                    float(frequency_hz) if frequency_hz is not None else current.frequency_hz,
+                    float(amplitude_vpp) if amplitude_vpp is not None else current.amplitude_vpp,
+                    float(offset_v) if offset_v is not None else (current.offset_v or 0.0),
+                    float(phase_deg) if phase_deg is not None else (current.phase_deg or 0.0))
+            else:
+                new = current                   # a load change alone: what plays stays
+            final_load = new_load if new_load is not None else out.load
+            given = {"amplitude": amplitude_vpp, "offset": offset_v, "frequency": frequency_hz,
+                     "phase": phase_deg}
+            try:
+                self.check(ch, new, final_load)
+            except SettingRefusedError as exc:
+                if given.get(exc.setting, 0) is not None:
+                    raise
+                # a value this call did not give: say it is the channel's present one
+                raise type(exc)(str(exc).replace(
+                    "; nothing was sent", f" (the channel's present {exc.setting}: give a new "
+                    f"one in the same command); nothing was sent"), setting=exc.setting,
+                    value=exc.value, limit=exc.limit, source=exc.source) from None
+            commands: list[str] = []
+            if wave_given or new_load is None:
+                body = ",".join(f"{n},{v if isinstance(v, str) else spec.format_number(v)}"
+                                for n, v in new.command_pairs(current))
+                commands.append(f"C{ch}:BSWV {body}")
+            if new_load is not None and new_load != out.load:
+                load_cmd = f"C{ch}:OUTP {'ON' if out.on else 'OFF'},LOAD,{new_load}"
+                if commands:
+                    commands = self._order_with_load(ch, current, new, out, new_load,
+                                                     commands[0], load_cmd)
+                else:
+                    commands = [load_cmd]
+            for command in commands:
+                self._write_checked(command)
             return new
+
+    def _order_with_load(self, ch: int, current: BasicWave, new: BasicWave, out: "OutputState",
+                         new_load: str, bswv: str, load_cmd: str) -> list[str]:
+        """BSWV and the load command in an order whose in-between state is allowed."""
+        load_first = ((current, new_load), [load_cmd, bswv])
+        wave_first = ((new, out.load), [bswv, load_cmd])
+        orders = [load_first, wave_first] if new_load == "HZ" else [wave_first, load_first]
+        refusals: list[SettingRefusedError] = []
+        for (wave, load), commands in orders:
+            try:
+                self.check(ch, wave, load, safety=out.on)
+            except SettingRefusedError as exc:
+                refusals.append(exc)
+                continue
+            return commands
+        first = refusals[0]
+        steps = ("load first", "wave first") if new_load == "HZ" else ("wave first", "load first")
+        reason = "; ".join(f"{step}: " + str(r).removeprefix(f"channel {ch}: ")
+                           .removesuffix("; nothing was sent")
+                           for step, r in zip(steps, refusals))
+        raise type(first)(
+            f"channel {ch}: the wave and the load cannot be changed one after the other "
+            f"without a state in between that is refused - {reason}"
+            + ("; switch the output off first" if out.on else "") + "; nothing was sent",
+            setting=first.setting, value=first.value, limit=first.limit, source=first.source)
 
     def set_waveform(self, channel: int, waveform: str) -> BasicWave:
         return self.configure(channel, waveform=waveform)
@@ -656,18 +783,11 @@ class FunctionGenerator4050:
             self._write_checked(f"C{ch}:OUTP ON")
 
     def set_load(self, channel: int, load: str | int) -> None:
-        """The load the amplitude refers to: 'HZ' (the base-stage amplifier) or 50."""
+        """The load the amplitude refers to: 'HZ' (the base-stage amplifier) or 50.  The
+        channel's wave is checked against the new load; to change the amplitude too, give
+        both to `configure(..., load=...)` (checked together, sent in a safe order)."""
         ch = _channel(channel)
-        try:
-            new = spec.normalise_load(load)
-        except ValueError as exc:
-            raise InstrumentLimitError(f"channel {ch}: {exc}; nothing was sent", setting="load",
-                                       value=str(load), limit="HZ or 50",
-                                       source=f"the {spec.MODEL} specification") from None
-        with self._link.lock:
-            state = self.output_state(ch)
-            self.check(ch, self.basic_wave(ch), new)
-            self._write_checked(f"C{ch}:OUTP {'ON' if state.on else 'OFF'},LOAD,{new}")
+        self.configure(ch, load=_load_setting(ch, load))
 
     # ------------------------------------------------------------------ arbitrary waveforms
     def select_arbitrary(self, channel: int, *, name: str | None = None,
@@ -717,6 +837,12 @@ class FunctionGenerator4050:
         codes = np.clip(np.round(v / peak * spec.ARB_CODE_FULL_SCALE),
                         spec.ARB_CODE_MIN, spec.ARB_CODE_MAX).astype(np.int16)
         wave = BasicWave("ARB", float(frequency_hz), 2 * peak, 0.0, 0.0)
+        if self._link.backend.endswith("@sim"):
+            # pyvisa-sim decodes every message as text: a binary block would fail half-way
+            raise InstrumentLinkError(
+                f"{self.resource_name}: the pyvisa-sim backend ({self._link.backend}) cannot "
+                f"carry the binary samples of an arbitrary waveform; nothing was sent - upload "
+                f"to the simulated generator (--resource sim) or to a real instrument")
         with self._link.lock:
             load = self.output_state(ch).load
             self.check(ch, wave, load)
@@ -754,6 +880,15 @@ def _channel(channel: int) -> int:
     return int(channel)
 
 
+def _load_setting(ch: int, load: str | int) -> str:
+    try:
+        return spec.normalise_load(load)
+    except ValueError as exc:
+        raise InstrumentLimitError(f"channel {ch}: {exc}; nothing was sent", setting="load",
+                                   value=str(load), limit="HZ or 50",
+                                   source=f"the {spec.MODEL} specification") from None
+
+
 def _check_arb_name(ch: int, name: str) -> None:
     if not spec.ARB_NAME_PATTERN.match(name):
         raise InstrumentLimitError(
@@ -774,19 +909,25 @@ def open_generator(resource: str, *, backend: str | None = None, limits: SafetyL
     safety limits from `limits` or from `testbed` (a Testbed record)."""
     if limits is None and testbed is not None:
         limits = SafetyLimits.from_testbed(testbed)
+    try:
+        timeout_ok = math.isfinite(float(timeout_s)) and float(timeout_s) > 0
+    except (TypeError, ValueError):
+        timeout_ok = False
+    if not timeout_ok or int(float(timeout_s) * 1000) < 1:
+        raise InstrumentLinkError(f"cannot open {resource}: the VISA timeout must be a number "
+                                  f"of seconds of at least 0.001, not {timeout_s!r}")
     backend = normalise_backend(backend)
     rm = _resource_manager(backend)
     link = _Link(rm, resource, backend, int(timeout_s * 1000))
     try:
         return FunctionGenerator4050(link, limits=limits, check_model=check_model)
-    except _visa_errors() as exc:
-        raise InstrumentLinkError(f"cannot open {resource} on {backend}: "
-                                  f"{str(exc).strip() or type(exc).__name__}") from None
     except GroundStationError:
         raise
-    except Exception as exc:       # pyvisa raises ValueError etc. for malformed addresses
+    except Exception as exc:       # VISA errors; ValueError etc. for malformed addresses
         link.shutdown()
-        raise InstrumentLinkError(f"cannot open {resource} on {backend}: {exc}") from None
+        log.debug("opening %s on %s failed", resource, backend, exc_info=exc)
+        why = _io_failure(exc, reading=True, timeout_ms=link.timeout_ms, backend=backend)
+        raise InstrumentLinkError(f"cannot open {resource} on {backend}: {why}") from None
 
 
 __all__ = ["ArbSelection", "ArbUpload", "BasicWave", "FunctionGenerator4050", "Identity",

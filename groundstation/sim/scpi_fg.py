@@ -20,6 +20,8 @@ Errors go to the error queue (SCPI numbers and texts, 20 deep, -350 on overflow)
 the standard event status bits (-1xx CME 32, -2xx EXE 16, -3xx DDE 8, -4xx QYE 4); a
 command in error changes nothing (a BSWV's pairs are checked together, then applied).
 Limits and formats come from `groundstation.instruments.spec4050`, like the driver's.
+For tests, `ScpiServer.inject_reply(command, data)` makes the server answer a query with
+raw bytes (a reply that is not text, not a number) or not at all (a hung instrument).
 
 Output model (deterministic: time is the device's tick, never the wall clock):
 * phase accumulates from a reference tick; a frequency change keeps the phase
@@ -485,6 +487,19 @@ class ScpiServer:
         self._threads: list[threading.Thread] = []
         self._conns: set[_Conn] = set()
         self._lock = threading.Lock()
+        #: injected reply faults (a test hook): command line (upper case) -> the bytes sent
+        #: instead of its reply (None: no reply at all, as a hung instrument)
+        self._reply_faults: dict[str, bytes | None] = {}
+
+    def inject_reply(self, command: str, reply: bytes | None) -> None:
+        """Answer the query line `command` with `reply` (raw bytes, e.g. not valid text;
+        None: never answer) from now on; the command is still executed."""
+        with self._lock:
+            self._reply_faults[command.strip().upper()] = reply
+
+    def clear_faults(self) -> None:
+        with self._lock:
+            self._reply_faults.clear()
 
     @property
     def resource(self) -> str:
@@ -603,9 +618,13 @@ class ScpiServer:
         line = bytes(buf[:nl]).decode("ascii", "replace").rstrip("\r")
         del buf[:nl + 1]
         replies = self.generator.handle_line(line)
-        if replies:
+        with self._lock:
+            faulty = line.strip().upper() in self._reply_faults
+            fault = self._reply_faults.get(line.strip().upper())
+        data = (fault or b"") if faulty else "".join(r + "\n" for r in replies).encode("ascii")
+        if data:
             try:
-                conn.sock.sendall("".join(r + "\n" for r in replies).encode("ascii"))
+                conn.sock.sendall(data)
             except OSError:
                 pass
         return True
