@@ -5,7 +5,9 @@
                                     [--report FILE.json] [--resume FILE.json]
 
 Exit codes: 0 completed, 1 a step failed or the operator aborted (the device was made
-safe and the report says which step and why), 2 the campaign file is malformed.
+safe and the report says which step and why), 2 the campaign file is malformed or asks
+for a value the rig must not be given (nothing was run), 130 interrupted by Ctrl-C (the
+device was made safe, the log closed; the report says how to resume).
 """
 
 from __future__ import annotations
@@ -18,18 +20,35 @@ from pathlib import Path
 from .errors import GroundStationError
 
 EXIT_OK, EXIT_FAILED, EXIT_MALFORMED = 0, 1, 2
+EXIT_INTERRUPTED = 130            # 128 + SIGINT, as a shell reports Ctrl-C
 
 
 def add_parsers(sub) -> argparse._SubParsersAction:
     p = sub.add_parser("campaign", help="scripted test campaigns")
     actions = p.add_subparsers(dest="campaign_action", required=True, metavar="ACTION")
-    s = actions.add_parser("show", help="list a campaign's steps")
+    s = actions.add_parser("show", help="list a campaign's steps and check its values",
+                           description="Lists every step of every run and checks every value "
+                                       "against the protocol dictionary, the testbed's limits "
+                                       "and the function generator's, and that every referenced "
+                                       "file loads. Exit 0: it may run; 2: problems (listed).")
     s.add_argument("file")
     s.set_defaults(func=_cmd_show)
     s = actions.add_parser("run", help="run a campaign",
-                           description="Runs every step; on a failure or Ctrl-C the device is "
+                           formatter_class=argparse.RawDescriptionHelpFormatter,
+                           description="Checks every value of every step first (as `campaign "
+                                       "show` does; nothing runs if any is refused), then runs "
+                                       "every step.  On a failure or Ctrl-C the device is "
                                        "aborted, the generator switched off and the recording "
-                                       "closed, and the report names the step and the reason.")
+                                       "closed with the reason, and the report names the step "
+                                       "and the reason.",
+                           epilog="exit status:\n"
+                                  "  0    completed\n"
+                                  "  1    a step failed or the operator aborted (rig made safe)\n"
+                                  "  2    the campaign file is malformed or asks for a value the\n"
+                                  "       rig must not be given (nothing was run)\n"
+                                  "  130  interrupted by Ctrl-C: rig made safe (ABORT, generator\n"
+                                  "       off), the run's log closed with the reason; continue\n"
+                                  "       with --resume REPORT.json")
     s.add_argument("file")
     s.add_argument("--device", default="sim", help="sim | tcp://HOST:PORT | serial://PORT?baud=N")
     s.add_argument("--fast", action="store_true",
@@ -50,23 +69,45 @@ def add_parsers(sub) -> argparse._SubParsersAction:
 
 
 def _cmd_show(args) -> int:
-    from .campaign import load_campaign
+    from .campaign import read_campaign
+    from .dictionary import load_dictionary
+
     try:
-        c = load_campaign(args.file)
+        c, problems = read_campaign(args.file, load_dictionary(getattr(args, "protocol_dir", None)))
     except GroundStationError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        _print_problems(exc)
         return EXIT_MALFORMED
     print(f"campaign {c.name}: {c.description}")
     print(f"testbed {c.testbed}; {c.runs} run(s) over {', '.join(c.matrix) or 'no matrix'}")
     for s in c.steps:
         print(f"  {s.index + 1:3d}  {'run ' + str(s.run) if s.run else s.phase:<9} {s.action:<16} "
-              + ", ".join(f"{k}={_short(v)}" for k, v in s.args.items()))
+              + ", ".join(f"{k}={_short(k, v)}" for k, v in s.args.items()))
+    if problems:
+        for p in problems:
+            print(f"error: {p}", file=sys.stderr)
+        print(f"refused: {len(problems)} problem(s); `campaign run` would run nothing",
+              file=sys.stderr)
+        return EXIT_MALFORMED
+    print("checked: every value is within the protocol's, the testbed's and the generator's "
+          "limits, and every referenced file loads")
     return EXIT_OK
 
 
-def _short(v) -> str:
+def _print_problems(exc: GroundStationError) -> None:
+    problems = getattr(exc, "problems", None) or [str(exc)]
+    for p in problems:
+        print(f"error: {p}", file=sys.stderr)
+    if len(problems) > 1:
+        print(f"refused: {len(problems)} problems; nothing was run", file=sys.stderr)
+
+
+def _short(key: str, v) -> str:
+    """A file reference by its name (the full path is in the campaign file); any other
+    value as it is, slashes and all."""
+    from .campaign import PATH_KEYS
+
     text = str(v)
-    return Path(text).name if "/" in text else text
+    return Path(text).name if key in PATH_KEYS and isinstance(v, str) else text
 
 
 class _Progress:
@@ -91,13 +132,14 @@ class _Progress:
 
 def _cmd_run(args) -> int:
     from .campaign import CampaignReport, CampaignRunner, load_campaign
+    from .dictionary import load_dictionary
     from .scripting import Testbed
 
     try:
-        c = load_campaign(args.file)
+        c = load_campaign(args.file, load_dictionary(getattr(args, "protocol_dir", None)))
         resume = CampaignReport.load(args.resume) if args.resume else None
     except GroundStationError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        _print_problems(exc)
         return EXIT_MALFORMED
     folder = Path(args.log_folder or Path("logs") / c.name)
     report_path = Path(args.report or folder / "report.json")
@@ -106,6 +148,7 @@ def _cmd_run(args) -> int:
     generator = None if args.generator == "none" else args.generator
     t0 = time.monotonic()
     report = None
+    interrupted = False
     try:
         with Testbed(args.device, testbed=c.testbed, fast=args.fast, generator=generator,
                      log_folder=folder, seed=args.seed, take_over=args.take_over, operator=operator,
@@ -114,13 +157,18 @@ def _cmd_run(args) -> int:
                                     progress=_Progress(len(c.steps)))
             report = runner.run(resume)
     except KeyboardInterrupt:
-        print("\ninterrupted: the device was aborted and the generator switched off", file=sys.stderr)
+        # outside a step (connecting, closing): the Testbed's exit has made the rig safe
+        interrupted = True
+        print("\ninterrupted by the operator (Ctrl-C): the device was aborted and the generator "
+              "switched off", file=sys.stderr)
     except GroundStationError as exc:
         print(f"error: {exc}", file=sys.stderr)
     if report is None:
-        return EXIT_FAILED
+        return EXIT_INTERRUPTED if interrupted else EXIT_FAILED
     report.save(report_path)
     print(report.summary())
     print(f"report: {report_path} (and {report_path.with_suffix('.txt').name}); "
           f"{time.monotonic() - t0:.1f} s")
+    if report.status == "interrupted":
+        return EXIT_INTERRUPTED
     return EXIT_OK if report.status == "completed" else EXIT_FAILED

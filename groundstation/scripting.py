@@ -163,7 +163,11 @@ class Testbed:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         try:
-            self.make_safe(reason=f"{exc_type.__name__}: {exc}" if exc_type else "end of script")
+            if exc_type is not None and issubclass(exc_type, KeyboardInterrupt):
+                reason = "interrupted by the operator (Ctrl-C)"
+            else:
+                reason = f"{exc_type.__name__}: {exc}" if exc_type else "end of script"
+            self.make_safe(reason=reason)
         finally:
             self.close()
 
@@ -235,7 +239,7 @@ class Testbed:
                 self.mark(f"stopped: {reason}" if reason else "stopped")
             except GroundStationError:
                 pass
-        self._stop_recorder_quietly()
+        self._stop_recorder_quietly(reason)
 
     def recover(self, reason: str = "", settle_s: float = 3.0) -> None:
         """After a failed run: make safe, let the rig come to rest for `settle_s` (a
@@ -458,14 +462,22 @@ class Testbed:
         if self.state.fault:
             raise ScriptError("the device reports a fault (see its EVENTs); it has disarmed")
 
-    def _stop_recorder_quietly(self) -> None:
+    def _stop_recorder_quietly(self, reason: str = "") -> None:
+        """Close the recording, its last journal entry saying why (`reason`): the log
+        then explains its own end - an operator's Ctrl-C, a failed step, the end of the
+        script."""
         rec, self.recorder = self.recorder, None
         if rec is not None:
             self._detach()
-            status = rec.stop()
+            why = reason or "end of the session"
+            try:
+                rec.note(f"recording closed: {why}")
+            except Exception:                          # closing must go on regardless
+                log.exception("could not note why the recording closes")
+            status = _stop_with_reason(rec, why)
             self.recordings.append({"name": rec.test_name, "files": [str(p) for p in status.files],
                                     "frames": status.frames, "discarded_blocks": rec.discarded_blocks,
-                                    "state": status.state})
+                                    "state": status.state, "stop_reason": why})
 
     def _detach(self) -> None:
         """The recorder off the link: telemetry, command and link listeners."""
@@ -499,6 +511,18 @@ class Testbed:
         sim, self._sim = self._sim, None
         if sim is not None:
             sim.stop()
+
+
+def _stop_with_reason(rec, reason: str):
+    """rec.stop() with the reason for the log's closing record, where the Recorder takes
+    one (the note written before it says the same either way)."""
+    import inspect
+
+    try:
+        takes_reason = "reason" in inspect.signature(rec.stop).parameters
+    except (TypeError, ValueError):
+        takes_reason = False
+    return rec.stop(reason=reason) if takes_reason else rec.stop()
 
 
 def _shortened(profile, seconds: float):
