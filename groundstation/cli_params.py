@@ -196,6 +196,7 @@ def _cmd_upload(args) -> int:
 
 def _cmd_show(args) -> int:
     from .params.compare import format_rows, three_way
+    from .params.upload import provenance
     from .params.design import load_design, table_values
     from .params import table as ptable
 
@@ -220,9 +221,20 @@ def _cmd_show(args) -> int:
             rows = three_way(device.dictionary, {"design": design_values, "uploaded": uploaded,
                                                  "device": active.values})
             print(f"device {device.address}: active table {active.crc:08x}")
+            # the same account of the active table that rollback acts on
+            origin = provenance(records, active.crc)
+            print(f"active {origin.text()}")
             if records:
                 r = records[-1]
-                print(f"last uploaded from here: {r.crc:08x} v{r.version} from {r.source}")
+                print(f"last uploaded from here: {r.crc:08x} v{r.version} from {r.source} - "
+                      + ("the device's active table" if r.crc == active.crc else
+                         f"NOT the device's active table ({active.crc:08x})"))
+            if origin.rollback_target is not None:
+                print(f"rollback would re-activate {origin.rollback_target:08x}")
+            else:
+                print("rollback: nothing to roll back to from this table")
+            if device.sim is not None:
+                print(_SIM_NOTE)
             print(format_rows(rows, only_differences=args.differences))
             differ = [r.name for r in rows if r.status == "differs"]
             if differ:
@@ -233,10 +245,18 @@ def _cmd_show(args) -> int:
     return EXIT_OK
 
 
+_SIM_NOTE = ("note: --device sim started a new simulated testbed for this command, with its "
+             "default table; tables uploaded by earlier commands went with their simulators "
+             "(run `groundstation sim` and use --device tcp://... to keep one)")
+
+
 def _cmd_rollback(args) -> int:
     try:
         with _Device(args) as device:
-            record = _loader(device, args).rollback(progress=_progress)
+            try:
+                record = _loader(device, args).rollback(progress=_progress)
+            except GroundStationError as exc:
+                return _fail(str(exc) + (f"\n{_SIM_NOTE}" if device.sim is not None else ""))
             print(f"rolled back: table {record.crc:08x} active again (was {record.previous_crc:08x}), "
                   f"verified")
     except GroundStationError as exc:

@@ -61,6 +61,7 @@ CONTROL_RATE_HZ = 1200.0          # the controller's loop rate (reference §2)
 MATCH_BAND_HZ = 100.0             # discrete and continuous responses are compared up to here
 CANCEL_TOLERANCE = 1e-6           # relative distance at which a pole and a zero cancel
 INTEGRATOR_TOLERANCE = 1e-9       # rad/s: a pole closer to s = 0 than this is an integrator
+SINGULAR_TOLERANCE = 1e-6         # relative distance from s = 2 fs' at which a root is refused
 GAIN_REFERENCE_HZ = 10.0          # sections share the gain equally at this frequency
 MODES = ("relative", "inertial")
 FRICTION_MODEL_CODES = {"SFM": 0, "DHM": 1, "DB-SFM": 2, "DB-DHM": 3}   # friction_comp_model
@@ -295,6 +296,13 @@ def _load(path: Path, chain: tuple[Path, ...]) -> ControllerDesign:
                          f"equivalence uses this design's testbed {testbed.path.name}")
     else:
         c0 = _transfer_function(doc, "c0", where)
+    labels = {"c0": "[c0]" + (f" (output-equivalent to {equivalent_to.name})" if equivalent_to else ""),
+              "c1": "[Q] (c1' = Q)" if q is not None else "[c1]", "c2": "[c2]"}
+    problems = [_singular_text(labels[label], kind, r, CONTROL_RATE_HZ, prewarp)
+                for label, tf in (("c0", c0), ("c1", c1), ("c2", c2))
+                for kind, r in singular_factors(tf, CONTROL_RATE_HZ, prewarp)]
+    if problems:
+        raise DesignError(f"{where}: cannot be discretised: " + "; ".join(problems))
     for label, tf in (("c0", c0), ("c1", c1), ("c2", c2)):
         if len(tf.zeros) > len(tf.poles):
             raise DesignError(f"{where}: {label} has {len(tf.zeros)} zeros and {len(tf.poles)} "
@@ -584,9 +592,54 @@ def bilinear_rate_hz(rate_hz: float, prewarp_hz: float | None) -> float:
     return wp / (2 * math.tan(wp / (2 * rate_hz)))
 
 
+def bilinear_singular_point(rate_hz: float = CONTROL_RATE_HZ, prewarp_hz: float | None = None) -> float:
+    """The s (rad/s) where the bilinear map this tool uses is singular.
+
+    z = (1 + s/(2 fs'))/(1 - s/(2 fs')) divides by zero at s = 2 fs', with fs' the rate
+    given to the map: 2 x 1200 = 2400 rad/s for plain Tustin, w_p / tan(w_p T / 2) when
+    pre-warped at f_p (2388.03 rad/s at 46.70 Hz)."""
+    return 2.0 * bilinear_rate_hz(rate_hz, prewarp_hz)
+
+
+def singular_factors(tf: TransferFunction, rate_hz: float = CONTROL_RATE_HZ,
+                     prewarp_hz: float | None = None) -> list[tuple[str, complex]]:
+    """("zero" | "pole", root) for every root of `tf` at the bilinear map's singular point
+    (within SINGULAR_TOLERANCE, relative): a pole there maps to z = infinity, a zero (an
+    all-pass or non-minimum-phase factor) to a zero at infinity that leaves the discrete
+    filter with a gain of zero.  Neither has a discrete equivalent."""
+    point = bilinear_singular_point(rate_hz, prewarp_hz)
+    out = []
+    for kind, roots in (("zero", tf.zeros), ("pole", tf.poles)):
+        for r in roots:
+            if abs(complex(r) - point) <= SINGULAR_TOLERANCE * point:
+                out.append((kind, complex(r)))
+    return out
+
+
+def _singular_text(label: str, kind: str, root: complex, rate_hz: float,
+                   prewarp_hz: float | None) -> str:
+    point = bilinear_singular_point(rate_hz, prewarp_hz)
+    fs = point / 2
+    how = (f"pre-warped at {prewarp_hz:g} Hz, the map uses fs' = {fs:.10g} Hz"
+           if prewarp_hz else f"plain Tustin at fs = {rate_hz:g} Hz")
+    side = "numerator" if kind == "zero" else "denominator"
+    effect = ("it would map to a pole at z = infinity (scipy cannot even form the sections)"
+              if kind == "pole" else
+              "it would map to a zero at z = infinity: the discrete filter loses that factor "
+              "and its gain becomes zero")
+    return (f"{label}: the {side} factor {_factor_text(np.array([root]))} puts a {kind} at "
+            f"s = {root.real:.10g} rad/s, exactly where the bilinear map z = (1 + sT/2)/(1 - sT/2) "
+            f"is singular, s = 2/T = 2 fs' = {point:.10g} rad/s ({how}); {effect}.  Move it "
+            f"off that point or change prewarp_hz")
+
+
 def discretise(tf: TransferFunction, rate_hz: float = CONTROL_RATE_HZ,
-               prewarp_hz: float | None = None) -> np.ndarray:
-    """Tustin (optionally pre-warped) -> second-order sections, gain shared across them."""
+               prewarp_hz: float | None = None, name: str = "transfer function") -> np.ndarray:
+    """Tustin (optionally pre-warped) -> second-order sections, gain shared across them.
+    A root at the map's singular point raises DesignError naming it."""
+    bad = singular_factors(tf, rate_hz, prewarp_hz)
+    if bad:
+        raise DesignError("; ".join(_singular_text(name, kind, r, rate_hz, prewarp_hz) for kind, r in bad))
     zd, pd, kd = signal.bilinear_zpk(tf.zeros, tf.poles, tf.gain, bilinear_rate_hz(rate_hz, prewarp_hz))
     # s = 0 maps to (2fs + 0)/(2fs - 0) = 1 exactly, so an integrator stays on z = 1
     sos = np.atleast_2d(signal.zpk2sos(zd, pd, kd))
@@ -634,7 +687,7 @@ def pad_sections(sos: np.ndarray, rows: int, name: str = "cascade") -> np.ndarra
 
 def discretise_design(design: ControllerDesign, rate_hz: float = CONTROL_RATE_HZ) -> dict[str, DiscreteCascade]:
     """c0, c1, c2 of the design as unpadded discrete cascades."""
-    return {name: DiscreteCascade(name, discretise(tf, rate_hz, design.prewarp_hz), tf.integrators)
+    return {name: DiscreteCascade(name, discretise(tf, rate_hz, design.prewarp_hz, name), tf.integrators)
             for name, tf in design.cascades.items()}
 
 

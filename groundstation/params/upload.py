@@ -166,6 +166,65 @@ class MemoryHistory:
 ROLLBACK_SOURCE = "rollback"
 
 
+def _when(t: float) -> str:
+    return time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(t))
+
+
+@dataclass
+class Provenance:
+    """What the history knows about one table (by CRC): the one answer `params show` and
+    `params rollback` both give, so they cannot contradict each other."""
+
+    crc: int
+    activated_by: UploadRecord | None = None    # newest record that made it active (upload or rollback)
+    uploaded_by: UploadRecord | None = None     # newest upload of it that was not a rollback
+    replaced_by: UploadRecord | None = None     # newest upload made while it was the active table
+
+    @property
+    def known(self) -> bool:
+        return any((self.activated_by, self.uploaded_by, self.replaced_by))
+
+    @property
+    def rollback_target(self) -> int | None:
+        """The table a rollback from this one re-activates: the one active before the
+        upload that made it (rollbacks skipped, so rolling back twice goes two back)."""
+        return self.uploaded_by.previous_crc if self.uploaded_by is not None else None
+
+    def text(self) -> str:
+        """One line: where this table came from, as far as this history knows."""
+        crc = f"{self.crc:08x}"
+        a, u, r = self.activated_by, self.uploaded_by, self.replaced_by
+        if a is None and r is None:
+            return f"table {crc} was not uploaded from here (not in this history)"
+        parts = []
+        if a is not None:
+            parts.append(f"put there from here at {_when(a.time)} by "
+                         + (a.source if a.source.startswith(ROLLBACK_SOURCE) else f"an upload of {a.source}"))
+        if u is not None and u is not a:
+            parts.append(f"first uploaded from here as {u.source} at {_when(u.time)}")
+        if u is None and r is not None:
+            parts.append(f"it was the device's table when {r.source} was uploaded at "
+                         f"{_when(r.time)}; it was never uploaded from here as a design")
+        return f"table {crc}: " + "; ".join(parts)
+
+
+def provenance(records: list[UploadRecord], crc: int) -> Provenance:
+    """What `records` (oldest first, as history.records() gives them) say about table `crc`."""
+    out = Provenance(crc)
+    for rec in reversed(records):
+        if rec.crc == crc:
+            if out.activated_by is None:
+                out.activated_by = rec
+            # a rollback, or an upload of the table that was already active, made nothing
+            # new: the table to go back to is the one before the upload that changed it
+            if out.uploaded_by is None and not rec.source.startswith(ROLLBACK_SOURCE) \
+                    and rec.previous_crc != crc:
+                out.uploaded_by = rec
+        if rec.previous_crc == crc and rec.crc != crc and out.replaced_by is None:
+            out.replaced_by = rec
+    return out
+
+
 class ParameterLoader:
     """Uploads, reads back and rolls back parameter tables through a DeviceClient."""
 
@@ -252,14 +311,15 @@ class ParameterLoader:
         one.  Rollbacks are skipped when looking for that upload, so a second rollback
         goes one table further back instead of undoing the first."""
         active = self.read_active()
-        target = None
-        for rec in reversed(self.history.records()):
-            if rec.crc == active.crc and not rec.source.startswith(ROLLBACK_SOURCE):
-                target = rec.previous_crc
-                break
+        origin = provenance(self.history.records(), active.crc)
+        target = origin.rollback_target
         if target is None:
-            raise UploadError(f"nothing to roll back to: the device's active table "
-                              f"(CRC {active.crc:08x}) was not uploaded from here")
+            if not origin.known:
+                raise UploadError(f"nothing to roll back to: the device's active table "
+                                  f"(CRC {active.crc:08x}) was not uploaded from here, and no "
+                                  f"upload from here replaced it")
+            raise UploadError(f"nothing further to roll back to: the device's active {origin.text()}; "
+                              f"the history holds no table that was active before it")
         if target == active.crc:
             raise UploadError(f"the previous table is the active one (CRC {active.crc:08x})")
         blob = self.history.table(target)
