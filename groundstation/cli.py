@@ -100,40 +100,49 @@ def _cmd_sim(args) -> int:
 
 
 def _cmd_monitor(args) -> int:
-    from .link import format_snapshot, open_client
-    from .sim.process import device_address
+    """Exit status as for `record`: 0 ended as asked, 1 link lost with --no-reconnect,
+    2 could not connect, 3 the session was taken over by another station."""
+    from .link import format_snapshot
+    from .link.keeper import LinkKeeper
+    from .stop_request import StopRequest
 
     d = load_dictionary(args.protocol_dir)
-    address, sim = device_address(args.device, args.testbed)
-    try:
-        client = open_client(d, address)
+    with StopRequest() as stop:
+        keeper = LinkKeeper(d, args.device, args.testbed, take_over=args.take_over,
+                            say=lambda text: print(text, flush=True))
         try:
-            result = client.connect(take_over=args.take_over)
+            client = keeper.open()
             info = client.command("GET_INFO").reply
-            print(f"connected to {address}: {info['description']} - firmware "
+            print(f"connected to {keeper.address}: {info['description']} - firmware "
                   f"{info['firmware_version'] >> 16}.{(info['firmware_version'] >> 8) & 255}."
-                  f"{info['firmware_version'] & 255}, protocol {d.version}, session "
-                  f"{result.reply['session_token']:08x}", flush=True)
+                  f"{info['firmware_version'] & 255}, protocol {d.version}", flush=True)
             t_end = time.monotonic() + args.duration if args.duration else None
             reported: set[int] = set()
-            while t_end is None or time.monotonic() < t_end:
-                time.sleep(args.interval)
+            while not stop.event.wait(args.interval):
+                if client.link_state == "ended":
+                    print(f"error: {client.link_error}", flush=True)
+                    return 3
                 if client.link_state != "up":
                     print(f"link {client.link_state}: {client.link_error}", flush=True)
-                    return 1
+                    if args.no_reconnect:
+                        return 1
+                    client = keeper.reopen(stop.event)
+                    if client is None:
+                        break
+                    reported.clear()
+                    continue
                 print(format_snapshot(client.stats.snapshot()), flush=True)
                 for err in client.stats.recent_errors():
                     if id(err) not in reported:
                         reported.add(id(err))
                         print(f"  {type(err).__name__}: {err}", flush=True)
-        except KeyboardInterrupt:
-            pass
+                if t_end is not None and time.monotonic() >= t_end:
+                    break
+            if stop.reason:
+                print(f"stopped: {stop.reason}", flush=True)
+            return 0
         finally:
-            client.close()
-    finally:
-        if sim is not None:
-            sim.stop()
-    return 0
+            keeper.close()
 
 
 def _cmd_run(args) -> int:
@@ -209,6 +218,8 @@ def build_parser() -> argparse.ArgumentParser:
         s.add_argument("--interval", type=float, default=1.0, help="seconds between lines")
         s.add_argument("--take-over", action="store_true",
                        help="take the session over from another host")
+        s.add_argument("--no-reconnect", action="store_true",
+                       help="stop (exit status 1) when the link is lost, instead of reconnecting")
         s.set_defaults(func=_cmd_monitor if name == "monitor" else _cmd_run)
     s = sub.add_parser("gui", help="the operator's window")
     s.add_argument("--device", default="sim", help="sim | tcp://HOST:PORT | serial://PORT | none")

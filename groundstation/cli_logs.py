@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import signal
-import threading
 import time
 from pathlib import Path
 
@@ -11,62 +9,111 @@ from .dictionary import load_dictionary
 from .errors import GroundStationError
 
 
+#: exit statuses of `record` (and `monitor`), as the --help epilog documents them
+EXIT_OK, EXIT_FAILED, EXIT_REFUSED, EXIT_TAKEN_OVER = 0, 1, 2, 3
+RECORD_EPILOG = """exit status: 0 the recording ended as asked (--duration, Ctrl-C or SIGTERM: the
+log is closed with the reason); 1 the recording failed (disk full ...) or the link was
+lost with --no-reconnect; 2 nothing could start (bad input, connection refused: the log,
+if one was created, is closed with the reason); 3 another station took the session
+over (the log says who and when). After a lost link the recording goes on and the
+link is reopened with back-off (1, 2, 4, 8, then every 10 s); the log records the gap."""
+
+
 def _cmd_record(args) -> int:
-    from .link import format_snapshot, open_client
+    from .link import format_snapshot
+    from .link.keeper import LinkKeeper
     from .logs import Recorder
     from .logs.live import attach_recorder
-    from .sim.process import device_address
     from .sim.testbed import load_testbed
+    from .stop_request import StopRequest
 
     d = load_dictionary(args.protocol_dir)
     testbed = load_testbed(args.testbed) if args.testbed else None
-    stop = threading.Event()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
-    address, sim = device_address(args.device, args.testbed)
     failures: list[str] = []
-    try:
-        client = open_client(d, address)
+    with StopRequest() as stop:
+        rec = Recorder(d, args.folder, test_name=args.name, notes=args.notes,
+                       testbed_text=testbed.text if testbed else "",
+                       testbed_name=testbed.name if testbed else "",
+                       testbed_path=str(testbed.path) if testbed else "",
+                       rollover_bytes=int(args.rollover_mb * 1e6) if args.rollover_mb else None,
+                       rollover_seconds=args.rollover_min * 60 if args.rollover_min else None,
+                       on_failure=failures.append)
+        path = rec.start()
+        print(f"recording to {path}", flush=True)
+        keeper = LinkKeeper(d, args.device, args.testbed, take_over=args.take_over,
+                            on_client=lambda c: attach_recorder(c, rec),
+                            say=lambda text: print(text, flush=True))
         try:
-            rec = Recorder(d, args.folder, test_name=args.name, notes=args.notes,
-                           testbed_text=testbed.text if testbed else "",
-                           testbed_name=testbed.name if testbed else "",
-                           testbed_path=str(testbed.path) if testbed else "",
-                           rollover_bytes=int(args.rollover_mb * 1e6) if args.rollover_mb else None,
-                           rollover_seconds=args.rollover_min * 60 if args.rollover_min else None,
-                           on_failure=failures.append)
-            path = rec.start()
-            attach_recorder(client, rec)
-            print(f"recording to {path}", flush=True)
-            client.connect(take_over=args.take_over)
+            try:
+                client = keeper.open()
+            except GroundStationError as exc:
+                rec.stop(reason=f"connect failed: {exc}")
+                print(f"error: {exc}\nthe log {path} is closed with that reason", flush=True)
+                return EXIT_REFUSED
             if args.notes:
                 rec.note(args.notes)
-            t_end = time.monotonic() + args.duration if args.duration else None
-            try:
-                while not stop.wait(1.0):
-                    st = rec.status()
-                    print(f"{st.path.name if st.path else ''}: {st.frames} frames, "
-                          f"{st.bytes / 1e6:.1f} MB | {format_snapshot(client.stats.snapshot())}",
-                          flush=True)
-                    if failures or client.link_state != "up":
-                        break
-                    if t_end is not None and time.monotonic() >= t_end:
-                        break
-            except KeyboardInterrupt:
-                pass
-            st = rec.stop()
-            if client.link_state != "up":
-                print(f"link {client.link_state}: {client.link_error}", flush=True)
-            if failures:
-                print(f"error: {failures[0]}", flush=True)
-                return 1
-            print(f"recorded {st.frames} frames in {len(st.files)} file(s): "
-                  + ", ".join(str(p) for p in st.files), flush=True)
-            return 0 if client.link_state == "up" else 1
+            _check_testbed(client, testbed, rec)
+            code, reason = _record_loop(args, rec, keeper, client, stop, failures, format_snapshot)
         finally:
-            client.close()
-    finally:
-        if sim is not None:
-            sim.stop()
+            keeper.close()
+        st = rec.stop(reason=reason)
+        print(f"recorded {st.frames} frames in {len(st.files)} file(s): "
+              + ", ".join(str(p) for p in st.files) + f" - {reason}", flush=True)
+        return code
+
+
+def _record_loop(args, rec, keeper, client, stop, failures, format_snapshot) -> tuple[int, str]:
+    """Print the status once a second until the recording should end; returns the exit
+    status and the reason the log is closed with."""
+    t_end = time.monotonic() + args.duration if args.duration else None
+    while True:
+        if failures:
+            print(f"error: {failures[0]}", flush=True)
+            return EXIT_FAILED, failures[0]
+        if client.link_state == "ended":       # another station took the session over
+            print(f"error: {client.link_error}", flush=True)
+            return EXIT_TAKEN_OVER, client.link_error
+        if client.link_state != "up":
+            lost = f"link {client.link_state}: {client.link_error}"
+            print(lost, flush=True)
+            if args.no_reconnect:
+                return EXIT_FAILED, lost
+            rec.record("event", {"source": "link", "state": "reconnecting", "message": lost})
+            client = keeper.reopen(stop.event)
+            if client is None:
+                return EXIT_OK, stop.reason
+            rec.record("event", {"source": "link", "state": "reconnected",
+                                 "message": f"reconnected to {keeper.address}"})
+            continue
+        if stop.event.is_set():
+            return EXIT_OK, stop.reason
+        if t_end is not None and time.monotonic() >= t_end:
+            return EXIT_OK, f"duration of {args.duration:g} s reached"
+        if stop.event.wait(min(1.0, max(0.0, t_end - time.monotonic())) if t_end else 1.0):
+            continue
+        st = rec.status()
+        print(f"{st.path.name if st.path else ''}: {st.frames} frames, "
+              f"{st.bytes / 1e6:.1f} MB | {format_snapshot(client.stats.snapshot())}", flush=True)
+
+
+def _check_testbed(client, testbed, rec) -> None:
+    """--testbed names the rig the log describes: warn (and journal it) when the device
+    says it runs another one.  A device names its configuration in GET_INFO's free-text
+    description; the simulated testbed names its testbed file there."""
+    if testbed is None:
+        return
+    try:
+        description = str(client.command("GET_INFO").reply.get("description", ""))
+    except GroundStationError:
+        return
+    rec.record("note", {"text": f"device: {description}"})
+    if testbed.path.name in description or testbed.name in description:
+        return
+    warning = (f"warning: --testbed {testbed.path.name} ({testbed.name}) but the device "
+               f"describes itself as \"{description}\" - the log records both; check "
+               f"that the testbed file matches the rig")
+    print(warning, flush=True)
+    rec.record("note", {"text": warning})
 
 
 def _cmd_log(args) -> int:
@@ -142,7 +189,8 @@ def _cmd_replay(args) -> int:
 
 
 def add_parsers(sub) -> None:
-    s = sub.add_parser("record", help="record a session to HDF5 (from the simulator or a rig)")
+    s = sub.add_parser("record", help="record a session to HDF5 (from the simulator or a rig)",
+                       epilog=RECORD_EPILOG)
     s.add_argument("--device", default="sim",
                    help="sim | tcp://HOST:PORT | serial://PORT?baud=N (default: sim)")
     s.add_argument("--testbed", default=None, help="testbed file (recorded in the log; for sim: the one to run)")
@@ -153,6 +201,8 @@ def add_parsers(sub) -> None:
     s.add_argument("--rollover-mb", type=float, default=0.0, help="start a new file after this size")
     s.add_argument("--rollover-min", type=float, default=0.0, help="start a new file after this time")
     s.add_argument("--take-over", action="store_true", help="take the session from another host")
+    s.add_argument("--no-reconnect", action="store_true",
+                   help="stop (exit status 1) when the link is lost, instead of reconnecting")
     s.set_defaults(func=_cmd_record)
 
     s = sub.add_parser("log", help="inspect, export or re-decode a recorded log")

@@ -470,18 +470,11 @@ class GeneratorController(QObject):
 
         def job(epoch):
             fg = self._require()
-            current = fg.output_state(channel).load
-            # the smaller drive in between: to high impedance first, to 50 ohm last (a 50
-            # ohm setting puts twice the volts on the amplifier's high-impedance input)
-            if load == "HZ" and current != "HZ":
-                fg.set_load(channel, load)
-                self._guard(epoch)
+            # one call: the new wave is checked against the new load, and the driver
+            # sends the load and the wave in the order that is safe in between
             sent = fg.configure(channel, waveform=wave.waveform, frequency_hz=frequency_hz,
                                 amplitude_vpp=amplitude_vpp, offset_v=offset_v,
-                                phase_deg=phase_deg)
-            if load == "50" and current != "50":
-                self._guard(epoch)
-                fg.set_load(channel, load)
+                                phase_deg=phase_deg, load=load)
             self._record("apply", {"channel": channel, "wave": asdict(sent), "load": load,
                                    "device_time": self._newest_device_time()})
             state = self._read_state(channel, motion_changed=True)

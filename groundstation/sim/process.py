@@ -39,8 +39,11 @@ class SimulatorProcess:
         self.fg_resource: str | None = None
 
     def start(self) -> str:
+        # its own session: the terminal's Ctrl-C is for the ground station, which then
+        # ends the session (the rig goes safe) and stops this child itself
         self.proc = subprocess.Popen(self.args, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                                     text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
+                                     text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"},
+                                     start_new_session=True)
         deadline = time.monotonic() + self.start_timeout
         assert self.proc.stdout is not None
         while time.monotonic() < deadline:

@@ -1,0 +1,107 @@
+"""A link kept open for a command-line session: connect, and reconnect with back-off.
+
+The window reconnects on its own after a lost link (gui/session.py, with the same
+delays); `record` and `monitor` use this.  For `--device sim` the keeper also owns the
+simulator child, and starts a fresh one if the old one died.  A session *taken over*
+by another station is not reconnected: that is a decision for the operator.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+from typing import Callable
+
+from ..dictionary import Dictionary
+from ..errors import GroundStationError
+from .client import DeviceClient
+
+log = logging.getLogger(__name__)
+
+#: seconds between reconnect attempts: quick at first, then every 10 s
+RECONNECT_DELAYS_S = (1.0, 2.0, 4.0, 8.0, 10.0)
+
+
+class LinkKeeper:
+    """Owns the device address (and the simulator child for 'sim') and the live client.
+
+    on_client(client) runs for every new client before it connects, so that a recorder
+    can be attached in time to journal the CONNECT; it returns the function that
+    detaches it again, called before that client is closed."""
+
+    def __init__(self, dictionary: Dictionary, device: str, testbed: str | None = None, *,
+                 take_over: bool = False,
+                 on_client: Callable[[DeviceClient], Callable[[], None]] | None = None,
+                 say: Callable[[str], None] = print):
+        self.dictionary = dictionary
+        self.device = device
+        self.testbed = testbed
+        self.take_over = take_over
+        self.on_client = on_client
+        self.say = say
+        self.client: DeviceClient | None = None
+        self.sim = None
+        self.address = ""
+        self.reconnects = 0
+        self._detach: Callable[[], None] | None = None
+
+    def open(self) -> DeviceClient:
+        """Start the simulator if asked for, open the link and connect; raises
+        GroundStationError (with the device's reason) if that fails."""
+        from ..sim.process import SimulatorProcess
+        from .address import open_client
+
+        if self.device == "sim":
+            if self.sim is None or self.sim.proc is None or self.sim.proc.poll() is not None:
+                if self.sim is not None:
+                    self.sim.stop()
+                self.sim = SimulatorProcess(pacing="realtime", testbed=self.testbed)
+                self.address = self.sim.start()
+                self.say(f"started the simulated testbed on {self.address}")
+        else:
+            self.address = self.device
+        client = open_client(self.dictionary, self.address)
+        self.client = client
+        if self.on_client is not None:
+            self._detach = self.on_client(client)
+        client.connect(take_over=self.take_over)
+        return client
+
+    def reopen(self, stop: threading.Event) -> DeviceClient | None:
+        """After a lost link: close the old client and try again, waiting the back-off
+        delays in between, until connected (returns the client) or `stop` is set (None)."""
+        attempt = 0
+        while not stop.is_set():
+            self._close_client()
+            delay = RECONNECT_DELAYS_S[min(attempt, len(RECONNECT_DELAYS_S) - 1)]
+            attempt += 1
+            self.say(f"reconnecting in {delay:g} s (attempt {attempt})")
+            if stop.wait(delay):
+                return None
+            try:
+                client = self.open()
+            except GroundStationError as exc:
+                self.say(f"reconnect failed: {exc}")
+                continue
+            self.reconnects += 1
+            self.say(f"reconnected to {self.address}")
+            return client
+        return None
+
+    def _close_client(self) -> None:
+        # close first, detach after: the recorder journals the DISCONNECT and the close
+        if self.client is not None:
+            self.client.close()
+            self.client = None
+        if self._detach is not None:
+            self._detach()
+            self._detach = None
+
+    def close(self) -> None:
+        """Disconnect (the device disarms) and stop the simulator child, if any."""
+        try:
+            self._close_client()
+        finally:
+            if self.sim is not None:
+                self.sim.stop()
+                self.sim = None

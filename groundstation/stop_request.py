@@ -1,0 +1,44 @@
+"""Ctrl-C and SIGTERM as a request to stop, with its reason, for the long CLI commands.
+
+Python turns Ctrl-C into a KeyboardInterrupt wherever the main thread happens to be,
+possibly in the middle of a command exchange or of closing a log.  The commands that
+run for a while (`record`, `monitor`) instead note the request and finish their loop at
+the next check: close the log with the reason, make the rig safe, exit with the
+documented status.  A second Ctrl-C still raises KeyboardInterrupt, for a program that
+is stuck.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+
+REASONS = {signal.SIGINT: "interrupted by the operator (Ctrl-C)",
+           signal.SIGTERM: "terminated (SIGTERM)"}
+
+
+class StopRequest:
+    """Use as a context manager around the command; `event` is set on the first
+    SIGINT/SIGTERM and `reason` says which.  The previous handlers come back on exit."""
+
+    def __init__(self) -> None:
+        self.event = threading.Event()
+        self.reason = ""
+        self._previous: dict[int, object] = {}
+
+    def _on_signal(self, signum, _frame) -> None:
+        if self.event.is_set() and signum == signal.SIGINT:
+            raise KeyboardInterrupt          # the second Ctrl-C: stop now
+        self.reason = REASONS.get(signum, f"signal {signum}")
+        self.event.set()
+
+    def __enter__(self) -> "StopRequest":
+        if threading.current_thread() is threading.main_thread():
+            for sig in REASONS:
+                self._previous[sig] = signal.signal(sig, self._on_signal)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        for sig, handler in self._previous.items():
+            signal.signal(sig, handler)
+        self._previous.clear()
