@@ -605,6 +605,16 @@ def test_spec_parameter_layout_table(dictionary):
         elif not isinstance(e["default"], list):
             assert parse_number(default) == e["default"], name
     assert spec_stated_table_size() == len(packed) == table_size(dictionary)
+    # the prose's "today 1–8, 10–15 and 20–26": the runs of consecutive ids in the TOML
+    ids = [e["id"] for e in layout]
+    runs, start = [], ids[0]
+    for a, b in zip(ids, ids[1:] + [None]):
+        if b != a + 1:
+            runs.append(f"{start}–{a}" if a != start else f"{a}")
+            start = b
+    stated = re.search(r"Ids need not be consecutive \(today\s+(.*?)\)\.", section, re.S)
+    assert stated, "§11.1 no longer states the id ranges"
+    assert re.split(r",\s*|\s+and\s+", stated.group(1).replace("\n", " ")) == runs
 
 
 def test_spec_default_parameter_table(dictionary):
