@@ -14,6 +14,7 @@ from ..sim.testbed import TESTBEDS_DIR
 from .campaign_panel import CampaignPanel
 from .channel_tree import ChannelTree
 from .charts import StripChartPanel
+from .demo import DEMO_TITLE, DemoController, plan_for
 from .fg_panel import GeneratorPanel
 from .params_panel import ParameterPanel
 from .profile_panel import ProfilePanel
@@ -65,6 +66,8 @@ class MainWindow(QMainWindow):
         self.profiles.sig_abort.connect(self.abort)
         self.campaign = CampaignPanel(session)
         self.campaign.sig_abort.connect(self.abort)
+        # the one-click demo on the simulated testbed (through the two docks above)
+        self.demo = DemoController(session, self.parameters, self.profiles, self.charts, parent=self)
         self.docks = {}
         for name, widget, area in (("Channels", self.tree, Qt.DockWidgetArea.LeftDockWidgetArea),
                                    ("Commands", self.commands, Qt.DockWidgetArea.RightDockWidgetArea),
@@ -87,6 +90,10 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.docks["Events"], self.docks["Profiles"])
         self.tabifyDockWidget(self.docks["Events"], self.docks["Campaign"])
         self.docks["Events"].raise_()
+        # the limit table's channel names in full by default (a saved layout wins)
+        self.status_panel.refresh()
+        self.resizeDocks([self.docks["Status and limits"]],
+                         [min(self.status_panel.preferred_width(), 480)], Qt.Orientation.Horizontal)
 
         self.link_label = QLabel("not connected")
         self.statusBar().addPermanentWidget(self.link_label)
@@ -97,6 +104,7 @@ class MainWindow(QMainWindow):
         session.campaign.sig_started.connect(lambda *_: self._campaign_running(True))
         session.campaign.sig_finished.connect(lambda *_: self._campaign_running(False))
         session.campaign.sig_failed.connect(lambda *_: self._campaign_running(False))
+        self._demo_bar()
         self._menus()
         # Abort: one key from anywhere in the application, whatever has the focus
         self.abort_shortcut = QShortcut(QKeySequence(Qt.Key.Key_Escape), self)
@@ -135,6 +143,8 @@ class MainWindow(QMainWindow):
         m.addSeparator()
         action(m, "Play &profile...", self._play_profile_dialog, "Ctrl+P")
         action(m, "Run &campaign...", self._run_campaign_dialog, "Ctrl+K")
+        m = self.menuBar().addMenu("D&emo")
+        m.addAction(self.demo_action)
         m = self.menuBar().addMenu("&View")
         action(m, "&Pause charts", lambda: self.charts.set_paused(not self.charts.paused), "Ctrl+Space")
         for dock in self.docks.values():
@@ -145,6 +155,55 @@ class MainWindow(QMainWindow):
             self, "Ground station", "Ground station for hybrid-flexure-bearing testbeds.\n"
             "Esc aborts: both motors to zero, drives off, mode IDLE, and the function "
             "generator's outputs off."))
+
+    # ------------------------------------------------------------------ demo
+    def _demo_bar(self) -> None:
+        self.demo_action = QAction(DEMO_TITLE, self)
+        self.demo_action.setObjectName("demo_action")
+        self.demo_action.triggered.connect(self.start_demo)
+        self.demo_toolbar = QToolBar("Demo")
+        self.demo_toolbar.setObjectName("demo_bar")
+        self.demo_toolbar.addAction(self.demo_action)
+        self.demo_button = self.demo_toolbar.widgetForAction(self.demo_action)
+        self.demo_button.setStyleSheet("QToolButton:enabled { background:#2e7d32; color:white; "
+                                       "font-weight:bold; padding:3px 8px; border-radius:4px; }")
+        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, self.demo_toolbar)
+        # the demo's state in a word, beside the link's (the details are its tooltip and
+        # the status bar's message): the top bar keeps its room for the link's health
+        self.demo_status = QLabel("")
+        self.statusBar().addPermanentWidget(self.demo_status)
+        self.demo.sig_state.connect(self._demo_state)
+        self.demo.sig_available.connect(self._demo_available)
+        self.demo.update_availability()
+
+    def start_demo(self) -> None:
+        reason = self.demo.start()
+        if reason:
+            self.statusBar().showMessage(f"Demo not started: {reason}", 8000)
+
+    def _demo_available(self, can_start: bool, reason: str) -> None:
+        offered = self.demo.offered()
+        self.demo_action.setVisible(offered)
+        self.demo_status.setVisible(offered)
+        self.demo_action.setEnabled(can_start)
+        plan = plan_for(self.session.testbed)
+        what = plan.describe() if plan is not None else ""
+        tip = f"On the simulated testbed: {what}" if can_start else f"Not now: {reason}"
+        self.demo_action.setToolTip(tip)
+        self.demo_action.setStatusTip(tip)
+
+    def _demo_state(self, state: str, text: str) -> None:
+        if state == "refused":
+            return
+        colour = {"completed": "#2e7d32", "aborted": "#c62828", "failed": "#c62828"}.get(state, "")
+        self.demo_status.setStyleSheet(f"color:{colour}; font-weight:bold;" if colour else "")
+        self.demo_status.setText(f"Demo {state}")
+        self.demo_status.setToolTip(text)
+        if state == "uploading":
+            self._show_dock("Parameters")
+        elif state == "playing":
+            self._show_dock("Profiles")
+        self.statusBar().showMessage(f"Demo {state}: {text}", 8000)
 
     # ------------------------------------------------------------------ actions
     def _load_design(self) -> None:
@@ -175,7 +234,8 @@ class MainWindow(QMainWindow):
 
     def abort(self) -> None:
         # the device's ABORT, the generator's outputs off, a running campaign stopped
-        # (its Testbed.abort) and a playing profile's wait ended
+        # (its Testbed.abort) and a playing profile's wait ended; the demo starts nothing more
+        self.demo.cancel()
         self.session.abort()
         self.statusBar().showMessage("ABORT sent; function generator outputs off", 3000)
 

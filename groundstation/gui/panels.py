@@ -9,9 +9,9 @@ import time
 from datetime import datetime
 from pathlib import Path
 
-from PySide6.QtCore import Qt, QTimer, Signal
+from PySide6.QtCore import QSignalBlocker, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QFont
-from PySide6.QtWidgets import (QCheckBox, QComboBox, QFormLayout, QGridLayout, QHBoxLayout,
+from PySide6.QtWidgets import (QAbstractScrollArea, QCheckBox, QComboBox, QFormLayout, QGridLayout, QHBoxLayout,
                                QHeaderView, QLabel, QLineEdit, QListWidget, QListWidgetItem,
                                QMessageBox, QPushButton, QSizePolicy, QSlider, QTableWidget,
                                QTableWidgetItem, QVBoxLayout, QWidget)
@@ -21,6 +21,7 @@ from ..monitor import GREEN, RED, YELLOW
 from .session import Session
 
 LAMP = {"up": "#2e7d32", "connecting": "#f9a825", "lost": "#c62828", "failed": "#c62828",
+        "ended": "#c62828",
         "closed": "#616161", "replay": "#1565c0"}
 STATE_COLOURS = {GREEN: QColor("#2e7d32"), YELLOW: QColor("#f9a825"), RED: QColor("#c62828")}
 
@@ -107,7 +108,7 @@ class ConnectionBar(QWidget):
         self.connect_button.setText("Connect" if state == "closed" else "Disconnect")
         self.lamp.setStyleSheet(lamp_style(LAMP.get(state, "#616161")))
         self.lamp.setToolTip(f"{state}: {message}")
-        if state in ("lost", "failed"):
+        if state in ("lost", "failed", "ended"):      # ended: another station took the session
             self.health.setText(f"LINK {state.upper()}: {message}")
             self.health.setStyleSheet("color:#c62828; font-weight:bold;")
         elif state == "closed":
@@ -167,9 +168,20 @@ class StatusPanel(QWidget):
         lay.addWidget(self.crc_warning)
         self.limits = QTableWidget(0, 4)
         self.limits.setHorizontalHeaderLabels(["channel", "value", "latched", "worst"])
-        self.limits.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeMode.Stretch)
+        # the channel's full name, always: its column is as wide as the longest name (four
+        # equal stretched columns cut "HOUSEKEEPING.temp_electronics" to "HOUSE…"); the
+        # numbers get fixed widths that fit them, and a narrow dock scrolls sideways
+        header = self.limits.horizontalHeader()
+        header.setSectionResizeMode(0, QHeaderView.ResizeMode.ResizeToContents)
+        fm = self.limits.fontMetrics()
+        for col, sample in ((1, "-0.0001234 rad/s"), (2, "yellow"), (3, "-0.0001234")):
+            header.setSectionResizeMode(col, QHeaderView.ResizeMode.Interactive)
+            self.limits.setColumnWidth(col, fm.horizontalAdvance(sample) + 16)
+        header.setStretchLastSection(True)
+        self.limits.setSizeAdjustPolicy(QAbstractScrollArea.SizeAdjustPolicy.AdjustToContents)
         self.limits.verticalHeader().setVisible(False)
         lay.addWidget(self.limits, 1)
+        self._limit_tips = self._limit_tooltips()
         self.ack = QPushButton("Acknowledge limits")
         self.ack.clicked.connect(lambda: session.limits.acknowledge())
         lay.addWidget(self.ack)
@@ -218,9 +230,34 @@ class StatusPanel(QWidget):
                 if item is None:
                     item = QTableWidgetItem()
                     self.limits.setItem(row, col, item)
-                item.setText(text)
+                if item.text() != text:
+                    item.setText(text)
+                    if col == 0:
+                        item.setToolTip(self._limit_tips.get(text, text))
                 if col == 2:
                     item.setBackground(STATE_COLOURS[st.latched])
+
+    def _limit_tooltips(self) -> dict[str, str]:
+        """'PACKET.item' -> its full name, description and limits, for the name's tooltip."""
+        tips = {}
+        for p in self.d.packets:
+            for item in p.items:
+                lim = item.limits
+                if lim is None:
+                    continue
+                bands = [f"{name} outside [{band[0]:g}, {band[1]:g}] {item.units}"
+                         for name, band in (("yellow", lim.yellow), ("red", lim.red))
+                         if band is not None]
+                tips[f"{p.name}.{item.name}"] = "\n".join(
+                    [f"{p.name}.{item.name}", item.description] + bands)
+        return tips
+
+    def preferred_width(self) -> int:
+        """The width that shows the whole limit table (names and numbers) unscrolled."""
+        t = self.limits
+        return (sum(t.columnWidth(c) for c in range(t.columnCount() - 1))
+                + t.sizeHintForColumn(t.columnCount() - 1) + t.frameWidth() * 2
+                + t.verticalScrollBar().sizeHint().width() + 24)
 
     def _set(self, name: str, text: str, colour: str = "") -> None:
         lab = self.fields[name]
@@ -269,6 +306,36 @@ class CommandPanel(QWidget):
         session.sig_command.connect(self._stage)
         #: tests answer the confirmation dialog through this (None: ask the operator)
         self.confirm_override: bool | None = None
+        # The box and the checkbox show what the device reports whenever that changes -
+        # whoever changed it (Set mode, a profile, a campaign, a script, ABORT).  Between
+        # changes the operator's choice stays, until Set mode sends it.
+        self.mode.setToolTip("follows the mode the device reports; choose one and press "
+                             "Set mode to change it")
+        self._mode_names = {v: k for k, v in session.d.command("SET_MODE").args[0].states.items()}
+        self._device_mode: int | None = None
+        self._device_friction: bool | None = None
+        self._follow_timer = QTimer(self)
+        self._follow_timer.timeout.connect(self.follow_device)
+        self._follow_timer.start(100)
+
+    def follow_device(self) -> None:
+        """Show the device's newest mode and friction-compensation state when they
+        change.  Signals are blocked: following the device sends nothing."""
+        hr = self.session.store.ring("HIGH_RATE")
+        mode, comp = hr.latest("mode"), hr.latest("friction_comp_on")
+        if mode is None:                   # no telemetry (yet, or a fresh store)
+            self._device_mode = self._device_friction = None
+            return
+        if int(mode) != self._device_mode:
+            self._device_mode = int(mode)
+            name = self._mode_names.get(int(mode))
+            if name is not None:
+                with QSignalBlocker(self.mode):
+                    self.mode.setCurrentText(name)
+        if comp is not None and bool(comp) != self._device_friction:
+            self._device_friction = bool(comp)
+            with QSignalBlocker(self.friction):
+                self.friction.setChecked(bool(comp))
 
     def send(self, name: str, **args) -> None:
         cmd = self.session.d.command(name)

@@ -206,7 +206,9 @@ class ParameterPanel(QWidget):
         self.mag_plot.setXRange(f[0], f[-1], padding=0)
 
     # ------------------------------------------------------------------ device actions
-    def upload(self) -> bool:
+    def upload(self, confirm: bool = True) -> bool:
+        """Validate and send the table (worker thread, via the Session).  confirm=False
+        skips the question: for the simulator's demo, which the operator asked for."""
         if self.values is None:
             self._say("nothing to upload: load a design or read the device's table", bad=True)
             return False
@@ -220,8 +222,8 @@ class ParameterPanel(QWidget):
             return False
         crc = ptable.table_crc(ptable.pack(self.d, self.values))
         what = self.source or "the edited table"
-        if not self._confirm(f"Upload parameter table {crc:08x} from {what} to the device?\n"
-                             "It becomes active at once (the device must be disarmed)."):
+        if confirm and not self._confirm(f"Upload parameter table {crc:08x} from {what} to the device?\n"
+                                         "It becomes active at once (the device must be disarmed)."):
             self._say("upload cancelled")
             return False
         self._sent = dict(self.values)

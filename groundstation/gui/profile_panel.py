@@ -337,17 +337,19 @@ class ProfilePanel(QWidget):
         self.psd_plot.setTitle(f"power spectral density ({p.units}²/Hz, Welch)", size="9pt")
 
     # ------------------------------------------------------------------ playing
-    def play(self) -> str | None:
-        """Ask the Session to play the loaded profile; returns why not (nothing sent)."""
+    def play(self, confirm: bool = True) -> str | None:
+        """Ask the Session to play the loaded profile; returns why not (nothing sent).
+        confirm=False skips the question: for the simulator's demo, which the operator
+        asked for."""
         p = self.profile
         if p is None or self.check is None:
             return self._refuse("load a profile first")
         if not self.check.ok:
             return self._refuse("the device would refuse this profile: " + "; ".join(self.check.problems))
         mode = self.mode.currentText() or default_mode(p.target)
-        if not self._confirm(f"Play {p.name} on the device?\n\nMode {mode}, drives armed, "
-                             f"{p.duration:g} s of {p.target} samples, then disarmed.\n"
-                             f"Esc aborts at any time."):
+        if confirm and not self._confirm(f"Play {p.name} on the device?\n\nMode {mode}, drives armed, "
+                                         f"{p.duration:g} s of {p.target} samples, then disarmed.\n"
+                                         f"Esc aborts at any time."):
             self._say("not played (cancelled)")
             return "cancelled"
         reason = self.session.play_profile(p, mode)
