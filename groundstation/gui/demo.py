@@ -230,7 +230,7 @@ class DemoController(QObject):
     def _on_link(self, state: str, message: str) -> None:
         if state == "up":
             self._upload_pending = False         # an old link's upload died with it
-        elif state in ("lost", "failed", "closed") and self.running:
+        elif state in ("lost", "failed", "closed", "ended") and self.running:
             self._fail(f"link {state}{': ' + message if message else ''}")
             return
         self.update_availability()
