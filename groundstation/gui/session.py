@@ -223,6 +223,8 @@ class Session(QObject):
     def _on_link_state(self, state: str, message: str) -> None:
         if state == "lost":
             self.sig_event.emit("ERROR", "link", f"link lost: {message}")
+        if state == "ended":       # taken over: not reconnected, the operator decides
+            self.sig_event.emit("ERROR", "link", message)
         if state in ("lost", "failed") and self._want_connected and self.replay is None:
             delay = RECONNECT_DELAYS_S[min(self._attempt, len(RECONNECT_DELAYS_S) - 1)]
             self._attempt += 1
