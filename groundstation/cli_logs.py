@@ -117,8 +117,13 @@ def _check_testbed(client, testbed, rec) -> None:
 
 
 def _cmd_log(args) -> int:
-    from .logs import LogReader, export_csv, export_mat
+    from .logs import LogReader
 
+    if args.action == "check":
+        from .logs.check import check_log
+        result = check_log(args.file)
+        print(result.format())
+        return result.exit_code
     if args.action == "info":
         with LogReader(args.file) as r:
             info = r.summary()
@@ -145,11 +150,16 @@ def _cmd_log(args) -> int:
         out = Path(args.output) if args.output else Path(args.file).with_suffix(
             ".csv" if args.format == "csv" else ".mat")
         channels = args.channels.split(",") if args.channels else None
-        with LogReader(args.file) as r:
-            fn = export_csv if args.format == "csv" else export_mat
-            rows = fn(r, out, args.packet, channels, start=args.start, stop=args.stop,
-                      timebase=args.timebase, relative=args.relative)
-        print(f"wrote {rows} rows of {args.packet} to {out}")
+        from .logs.export import export
+        with LogReader(args.file, salvage=args.salvage) as r:
+            res = export(r, out, args.packet, args.format, channels, start=args.start,
+                         stop=args.stop, timebase=args.timebase, relative=args.relative,
+                         salvage=args.salvage)
+        if res.damage:
+            print(f"salvaged {res.rows} rows of {args.packet} to {out}; {res.damage}; "
+                  f"nothing after that was exported")
+            return 1
+        print(f"wrote {res.rows} rows of {args.packet} to {out}")
         return 0
     if args.action == "redecode":
         from .logs.redecode import redecode
@@ -180,8 +190,11 @@ def _cmd_replay(args) -> int:
                 print(f"t={src.position:9.3f} s | {format_snapshot(src.stats.snapshot())}", flush=True)
         except KeyboardInterrupt:
             src.pause()
+        if src.link_state == "lost" and isinstance(src.error, GroundStationError):
+            raise src.error              # a damaged log: main() prints the one-line reason
         snap = src.stats.snapshot()
-        print(f"end t={src.position:.3f} s | {format_snapshot(snap)}", flush=True)
+        end = "-" if src.position is None else f"{src.position:.3f}"
+        print(f"end t={end} s | {format_snapshot(snap)}", flush=True)
         for name, ps in sorted(snap.packets.items()):
             print(f"  {name:<13} {ps.frames:>9} frames, {ps.dropped} dropped in "
                   f"{sum(1 for g in snap.gap_events if g[1] == name)} gap(s)")
@@ -209,6 +222,9 @@ def add_parsers(sub) -> None:
     lsub = s.add_subparsers(dest="action", required=True)
     a = lsub.add_parser("info", help="packets, channels, duration, drops, parameters, events")
     a.add_argument("file")
+    a = lsub.add_parser("check", help="what of a (damaged) log is readable: exit 0 intact, "
+                                      "1 damaged but partly readable, 2 unreadable")
+    a.add_argument("file")
     a = lsub.add_parser("export", help="channels of one packet to CSV or MATLAB .mat")
     a.add_argument("file")
     a.add_argument("--format", choices=["csv", "mat"], default="csv")
@@ -220,6 +236,9 @@ def add_parsers(sub) -> None:
     a.add_argument("--relative", action="store_true",
                    help="--from/--to count from the start of the log")
     a.add_argument("-o", "--output", default=None, help="output file (default: beside the log)")
+    a.add_argument("--salvage", action="store_true",
+                   help="from a damaged log, export the rows before the first unreadable one "
+                        "(exit 1 when the damage cut the range short)")
     a = lsub.add_parser("redecode", help="decode the recorded frames again with another dictionary")
     a.add_argument("file")
     a.add_argument("output")

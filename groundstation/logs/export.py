@@ -10,17 +10,24 @@ MAT: `scipy.io.savemat` (format 5, compressed) with one struct named after the p
 one field per channel (column vectors), device_time, host_time, and structs `units` and
 `description` with the same field names; plus a `log_info` struct saying where the data
 came from.  Names are made MATLAB-valid (anything but letters, digits and _ becomes _).
+
+Both are written to a temporary file beside the target and renamed when complete, so a
+failure never leaves a partial file (`atomic.py`).  A damaged log raises LogDamagedError
+(an error of the input, not of the output); with `salvage=True` the rows before the
+first unreadable one are exported instead, and `export()` says where the damage begins.
 """
 
 from __future__ import annotations
 
 import re
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Iterable
 
 import numpy as np
 
-from .reader import Channel, EmptyRangeError, LogError, LogQueryError, LogReader
+from .atomic import atomic_output
+from .reader import Channel, EmptyRangeError, LogDamagedError, LogError, LogQueryError, LogReader
 
 _FLOAT_FMT = "%.17g"
 MATLAB_NAME_MAX = 63
@@ -35,12 +42,92 @@ def _columns(reader: LogReader, packet: str, channels: str | Iterable[str] | Non
     return [c for c in chans if c.name not in ("device_time", "host_time")]
 
 
-def _rows(reader: LogReader, packet: str, start, stop, timebase: str, relative: bool) -> tuple[int, int]:
-    i0, i1 = reader.index_range(packet, start, stop, timebase, relative=relative)
+@dataclass(frozen=True)
+class ExportResult:
+    """What an export wrote: `rows` rows of `packet` to `path`.  After a salvage,
+    `damage` says where the unreadable part begins ('' when the range read whole) and
+    `wanted` is how many rows the range holds in the file, readable or not."""
+
+    path: Path
+    packet: str
+    rows: int
+    wanted: int
+    damage: str = ""
+
+
+def _rows(reader: LogReader, packet: str, start, stop, timebase: str, relative: bool,
+          limit: int | None = None) -> tuple[int, int]:
+    i0, i1 = reader.index_range(packet, start, stop, timebase, relative=relative, limit=limit)
     if i1 <= i0:
         raise EmptyRangeError(f"{reader.path}: no {packet} frames in "
                               f"{reader.describe_range(packet, start, stop, timebase, relative)}")
     return i0, i1
+
+
+def _needed(packet: str, chans: list[Channel], raw: bool) -> tuple[list[str], list[str]]:
+    """Datasets an export of `chans` reads: per-row ones, and byte streams (text items)."""
+    base = f"telemetry/{packet}"
+    rows = [f"{base}/device_time", f"{base}/host_time"]
+    streams = []
+    for c in chans:
+        if c.kind == "text":
+            streams.append(f"{base}/{c.name}")
+        elif (raw and c.has_raw) or c.from_raw:
+            rows.append(f"{base}/raw/{c.name}")
+        else:
+            rows.append(f"{base}/{c.name}")
+    return rows, streams
+
+
+def readable_limit(reader: LogReader, packet: str, chans: list[Channel], raw: bool = False) -> tuple[int, str]:
+    """(k, what): the first k rows of `packet` read in every column `chans` need; `what`
+    names the first unreadable dataset ('' when all rows read)."""
+    limit = reader.n_frames(packet)
+    what = ""
+    rows, streams = _needed(packet, chans, raw)
+    for path in rows + [f"{s}/{c}" for s in streams for c in ("offset", "length")]:
+        k, err = reader.readable_rows(path, 0, limit)
+        if k < limit:
+            limit, what = k, f"dataset /{path} unreadable after frame {k} ({err})"
+    for s in streams:           # records whose bytes lie in the readable part of the stream
+        if not limit:
+            break
+        nbytes, err = reader.readable_rows(f"{s}/data")
+        ends = (reader._read(f"{s}/offset", slice(0, limit)).astype(np.int64)
+                + reader._read(f"{s}/length", slice(0, limit)).astype(np.int64))
+        bad = np.flatnonzero(ends > nbytes)
+        if len(bad) and bad[0] < limit:
+            limit = int(bad[0])
+            what = f"dataset /{s}/data unreadable after byte {nbytes} ({err}), frame {limit}"
+    return limit, what
+
+
+def _plan(reader: LogReader, packet: str, channels, start, stop, timebase: str, relative: bool,
+          raw: bool, salvage: bool) -> tuple[list[Channel], int, int, int, str]:
+    """(channels, i0, i1, rows the range holds, damage) of an export."""
+    chans = _columns(reader, packet, channels)
+    if not salvage:
+        i0, i1 = _rows(reader, packet, start, stop, timebase, relative)
+        return chans, i0, i1, i1 - i0, ""
+    limit, what = readable_limit(reader, packet, chans, raw)
+    n = reader.n_frames(packet)
+    if limit == n:
+        i0, i1 = _rows(reader, packet, start, stop, timebase, relative)
+        return chans, i0, i1, i1 - i0, ""
+    if limit == 0:
+        raise LogDamagedError(reader.path, f"no {packet} frame is readable: {what}",
+                              salvageable=False)
+    last = float(reader.read_rows(packet, [], limit - 1, limit)["device_time"][0])
+    damage = (f"the log is damaged after {packet} frame {limit} of {n} (device time "
+              f"{last:.4f} s): {what}")
+    # the range is searched among the readable rows only (a search must not touch the rest)
+    i0, i1 = reader.index_range(packet, start, stop, timebase, relative=relative, limit=limit)
+    if i1 <= i0:
+        raise EmptyRangeError(f"{reader.path}: no readable {packet} frames in the range asked; "
+                              f"{damage}")
+    if i1 < limit:              # the range ends before the damage
+        return chans, i0, i1, i1 - i0, ""
+    return chans, i0, i1, -1, damage
 
 
 def _header_name(name: str, units: str) -> str:
@@ -58,18 +145,22 @@ def _csv_text(values: np.ndarray) -> np.ndarray:
 def export_csv(reader: LogReader, path: str | Path, packet: str,
                channels: str | Iterable[str] | None = None, start: float | None = None,
                stop: float | None = None, timebase: str = "device", *, relative: bool = False,
-               raw: bool = False, chunk_rows: int = 65536) -> int:
+               raw: bool = False, chunk_rows: int = 65536, salvage: bool = False) -> int:
     """Write `channels` of `packet` for [start, stop] (timebase seconds) to a CSV file;
-    returns the number of rows.  raw=True writes wire counts for converted items."""
-    chans = _columns(reader, packet, channels)
-    i0, i1 = _rows(reader, packet, start, stop, timebase, relative)
-    path = Path(path)
+    returns the number of rows.  raw=True writes wire counts for converted items;
+    salvage=True writes the rows before the first unreadable one of a damaged log."""
+    return export(reader, path, packet, "csv", channels, start, stop, timebase, relative=relative,
+                  raw=raw, chunk_rows=chunk_rows, salvage=salvage).rows
+
+
+def _write_csv(reader: LogReader, path: Path, packet: str, chans: list[Channel], i0: int, i1: int,
+               raw: bool, chunk_rows: int) -> int:
     header = ["device_time [s]", "host_time [s]"] + [
         _header_name(c.name, "counts" if raw and c.has_raw else c.units) for c in chans]
     names = [c.name for c in chans]
     written = 0
-    try:
-        with open(path, "w", encoding="utf-8", newline="") as fh:
+    with atomic_output(path, ExportError) as tmp:
+        with open(tmp, "w", encoding="utf-8", newline="") as fh:
             fh.write(",".join(header) + "\n")
             for a in range(i0, i1, chunk_rows):
                 data = reader.read_rows(packet, names, a, min(i1, a + chunk_rows), raw=raw)
@@ -85,8 +176,6 @@ def export_csv(reader: LogReader, path: str | Path, packet: str,
                     table[f"c{k}"] = c
                 np.savetxt(fh, table, fmt=fmt, delimiter=",")
                 written += m
-    except OSError as exc:
-        raise ExportError(f"cannot write {path}: {exc.strerror or exc}") from None
     return written
 
 
@@ -101,13 +190,44 @@ def matlab_name(name: str) -> str:
 def export_mat(reader: LogReader, path: str | Path, packet: str,
                channels: str | Iterable[str] | None = None, start: float | None = None,
                stop: float | None = None, timebase: str = "device", *, relative: bool = False,
-               raw: bool = False) -> int:
+               raw: bool = False, salvage: bool = False) -> int:
     """Write `channels` of `packet` for [start, stop] to a MATLAB .mat file (one struct
-    named after the packet); returns the number of rows."""
+    named after the packet); returns the number of rows.  salvage=True: as export_csv."""
+    return export(reader, path, packet, "mat", channels, start, stop, timebase, relative=relative,
+                  raw=raw, salvage=salvage).rows
+
+
+def export(reader: LogReader, path: str | Path, packet: str, fmt: str = "csv",
+           channels: str | Iterable[str] | None = None, start: float | None = None,
+           stop: float | None = None, timebase: str = "device", *, relative: bool = False,
+           raw: bool = False, chunk_rows: int = 65536, salvage: bool = False) -> ExportResult:
+    """export_csv / export_mat (fmt 'csv' or 'mat') with a full account of what was
+    written, including where a salvaged export stopped."""
+    if fmt not in ("csv", "mat"):
+        raise ExportError(f"export format must be 'csv' or 'mat', not {fmt!r}")
+    path = Path(path)
+    chans, i0, i1, wanted, damage = _plan(reader, packet, channels, start, stop, timebase,
+                                          relative, raw, salvage)
+    if fmt == "csv":
+        rows = _write_csv(reader, path, packet, chans, i0, i1, raw, chunk_rows)
+    else:
+        rows = _write_mat(reader, path, packet, chans, i0, i1, raw, start, stop, timebase,
+                          relative)
+    return ExportResult(path, packet, rows, rows if wanted < 0 else wanted, damage)
+
+
+def _log_info(reader: LogReader) -> dict[str, object]:
+    """Where the data came from, from the root attributes (not the full summary, which
+    would read every sequence column - and part of a damaged log cannot be read)."""
+    a = reader.attrs
+    return {k: a.get(k, "") for k in ("test_name", "run", "created_utc", "protocol_version",
+                                       "dictionary_hash")}
+
+
+def _write_mat(reader: LogReader, path: Path, packet: str, chans: list[Channel], i0: int, i1: int,
+               raw: bool, start, stop, timebase: str, relative: bool) -> int:
     import scipy.io
 
-    chans = _columns(reader, packet, channels)
-    i0, i1 = _rows(reader, packet, start, stop, timebase, relative)
     data = reader.read_rows(packet, [c.name for c in chans], i0, i1, raw=raw)
     fields: dict[str, str] = {}                  # matlab name -> channel name
     for name in ["device_time", "host_time"] + [c.name for c in chans]:
@@ -125,20 +245,15 @@ def export_mat(reader: LogReader, path: str | Path, packet: str,
     struct: dict[str, object] = {m: data[name] for m, name in fields.items()}
     struct["units"] = {m: units[name] for m, name in fields.items()}
     struct["description"] = {m: descr[name] for m, name in fields.items()}
-    info = reader.info
-    log_info = {"file": str(reader.path), "packet": packet, "test_name": info.test_name,
-                "run": info.run, "created_utc": info.created_utc,
-                "protocol_version": info.protocol_version,
-                "dictionary_hash": info.dictionary_hash, "timebase": timebase,
+    log_info = {"file": str(reader.path), "packet": packet, **_log_info(reader), "timebase": timebase,
                 "start": np.nan if start is None else float(start),
                 "stop": np.nan if stop is None else float(stop), "relative": int(relative),
                 "raw_counts": int(raw)}
-    try:
-        scipy.io.savemat(str(path), {matlab_name(packet): struct, "log_info": log_info},
+    with atomic_output(path, ExportError) as tmp, open(tmp, "wb") as fh:
+        scipy.io.savemat(fh, {matlab_name(packet): struct, "log_info": log_info},
                          do_compression=True, oned_as="column", long_field_names=True)
-    except OSError as exc:
-        raise ExportError(f"cannot write {path}: {exc.strerror or exc}") from None
-    return i1 - i0
+    return len(data["device_time"])
 
 
-__all__ = ["ExportError", "LogQueryError", "export_csv", "export_mat", "matlab_name"]
+__all__ = ["ExportError", "ExportResult", "LogQueryError", "export", "export_csv", "export_mat",
+           "matlab_name", "readable_limit"]

@@ -105,8 +105,12 @@ class LogFile:
 
     def __init__(self, path: Path, dictionary: Dictionary, *, test_name: str = "", run: int = 1,
                  notes: str = "", testbed_text: str = "", testbed_name: str = "",
-                 testbed_path: str = "", compression: dict | None = None):
+                 testbed_path: str = "", compression: dict | None = None,
+                 created_utc: str | None = None):
+        """`created_utc` (ISO 8601) overrides the start time recorded: a file written
+        from another one (log redecode) keeps the session's own start, not its own."""
         self.path = Path(path)
+        self.created_utc = created_utc
         self.d = dictionary
         self.compression = dict(schema.COMPRESSION if compression is None else compression)
         self.frames_written = 0
@@ -129,7 +133,7 @@ class LogFile:
         a["schema"] = schema.SCHEMA
         a["schema_version"] = schema.SCHEMA_VERSION
         a["uuid"] = str(uuid.uuid4())
-        a["created_utc"] = datetime.now(timezone.utc).isoformat()
+        a["created_utc"] = self.created_utc or datetime.now(timezone.utc).isoformat()
         a["software_version"] = __version__
         a["host"] = socket.gethostname()
         try:
@@ -272,9 +276,10 @@ class LogFile:
         except OSError:
             return 0
 
-    def close(self, clean: bool = True) -> None:
+    def close(self, clean: bool = True, stop_utc: str | None = None) -> None:
         """Close; a clean close reopens the file to mark it complete (not possible in
-        SWMR write mode, which allows no new attributes)."""
+        SWMR write mode, which allows no new attributes).  `stop_utc` overrides the end
+        time recorded (now), as `created_utc` does the start."""
         try:
             self.f.close()
         finally:
@@ -287,7 +292,7 @@ class LogFile:
                     f = h5py.File(self.path, "r+", libver=schema.LIBVER, locking=False)
                 with f:
                     f.attrs["clean_close"] = True
-                    f.attrs["stop_utc"] = datetime.now(timezone.utc).isoformat()
+                    f.attrs["stop_utc"] = stop_utc or datetime.now(timezone.utc).isoformat()
                     f.attrs["frames"] = self.frames_written
 
 

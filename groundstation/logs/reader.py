@@ -16,7 +16,9 @@ host).  Tick ranges `[tick_start, tick_stop)` are half-open, like Python slices.
 
 from __future__ import annotations
 
+import functools
 import json
+import os
 import tomllib
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -54,6 +56,118 @@ class LogQueryError(LogError):
 
 class EmptyRangeError(LogQueryError):
     """A time or tick range holds no frames of the packet."""
+
+
+class LogDamagedError(LogFormatError):
+    """The file is (or was) a log but part of it cannot be read: empty, superblock
+    destroyed, truncated, or a dataset / attribute that HDF5 cannot read any more.
+
+    `what` names the damage; the message adds the file and what to do about it
+    (`groundstation log check`, and `log export --salvage` when something is readable)."""
+
+    def __init__(self, path: str | Path, what: str, *, salvageable: bool = True):
+        self.path = Path(path)
+        self.what = what
+        self.salvageable = salvageable
+        if salvageable:
+            advice = (f"run `groundstation log check {self.path}` to see what is readable, and "
+                      f"`groundstation log export {self.path} --salvage` to export it")
+        else:
+            advice = (f"nothing in it can be read (`groundstation log check {self.path}` "
+                      f"says what was found)")
+        super().__init__(f"{self.path}: damaged log, {what}; {advice}")
+
+
+#: what h5py raises when the bytes under a read are not what HDF5 wrote (a filter fails,
+#: a signature or checksum does not match, an address lies past the end of the file)
+H5_READ_ERRORS = (OSError, RuntimeError)
+#: signatures of HDF5 structures (object header, B-trees, heaps, chunk index) that show
+#: a file without a valid superblock once was an HDF5 file
+_HDF5_SIGNATURES = (b"OHDR", b"TREE", b"GCOL", b"FRHP", b"BTHD", b"EAHD", b"FAHD")
+
+
+def truncation_text(actual: int, expected: int) -> str:
+    return f"truncated: file ends at byte {actual}, HDF5 expects {expected}"
+
+
+def file_truncation(f: h5py.File, path: Path) -> tuple[int, int] | None:
+    """(bytes on disk, bytes HDF5 expects) if the file is shorter than its superblock's
+    end-of-file address says, else None.  HDF5 itself refuses such a file in normal read
+    mode ("truncated file: eof = ..."), but not in the SWMR read mode we use (a writer
+    may be extending it), so we ask: H5Fget_filesize is max(end of allocated space,
+    end of file), larger than the size on disk exactly when the file was cut short."""
+    try:
+        expected = int(f.id.get_filesize())
+        actual = os.stat(path).st_size
+    except (OSError, RuntimeError):
+        return None
+    return (actual, expected) if expected > actual else None
+
+
+def _superblock_eof(path: Path) -> int | None:
+    """End-of-file address from a version 2/3 superblock at offset 0 (the format our
+    logs use), for when HDF5 cannot open the file to say it: signature (8 bytes),
+    version, sizes of offsets and lengths, flags, then base, extension and EOF addresses."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(48)
+    except OSError:
+        return None
+    if len(head) < 12 or head[:8] != b"\x89HDF\r\n\x1a\n" or head[8] not in (2, 3):
+        return None
+    size = head[9]
+    at = 12 + 2 * size
+    if size not in (4, 8) or len(head) < at + size:
+        return None
+    return int.from_bytes(head[at:at + size], "little")
+
+
+def _looks_like_hdf5_body(path: Path, limit: int = 4 << 20) -> bool:
+    try:
+        with open(path, "rb") as fh:
+            body = fh.read(limit)
+    except OSError:
+        return False
+    return any(sig in body for sig in _HDF5_SIGNATURES)
+
+
+def first_unreadable(ds: h5py.Dataset, start: int, stop: int) -> tuple[int, str]:
+    """(k, error) for rows [start, stop) of `ds`: rows start..k-1 read, row k's chunk does
+    not (k == stop and error '' when all read).  Reads many chunks at a time and narrows
+    down to one chunk only where a read fails."""
+    step = ds.chunks[0] if ds.chunks else max(1, stop - start)
+    block = step * 256
+    a = start
+    while a < stop:
+        b = min(stop, a + block)
+        try:
+            ds[a:b]
+        except H5_READ_ERRORS as exc:
+            first_error = str(exc)
+            c = a
+            while c < b:
+                d = min(b, (c // step + 1) * step)
+                try:
+                    ds[c:d]
+                except H5_READ_ERRORS as exc2:
+                    return c, str(exc2)
+                c = d
+            return a, first_error          # only the large read fails: be conservative
+        a = b
+    return stop, ""
+
+
+def _guard(method):
+    """Turn an HDF5 read failure inside a public LogReader method into LogDamagedError."""
+
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            return method(self, *args, **kwargs)
+        except H5_READ_ERRORS as exc:
+            raise self._damaged(f"HDF5 cannot read part of the file's structure ({exc})") from None
+
+    return wrapper
 
 
 @dataclass(frozen=True)
@@ -226,32 +340,71 @@ def _open_h5(path: Path) -> h5py.File:
     return h5py.File(path, "r", libver="latest", swmr=True)
 
 
-class LogReader:
-    """A recorded session, read lazily.  Use as a context manager or call close()."""
+def open_log_file(path: Path, *, salvage: bool = False) -> tuple[h5py.File, tuple[int, int] | None]:
+    """Open `path` for SWMR reading, or say precisely why it cannot be read: no such
+    file, empty, not HDF5, HDF5 structures without a superblock, unopenable, truncated.
+    Returns the file and (bytes on disk, bytes expected) when it is truncated - which
+    raises LogDamagedError unless `salvage` (then the caller reads what it can)."""
+    if not path.exists():
+        raise LogError(f"{path}: no such file")
+    if not path.is_file():
+        raise LogFormatError(f"{path} is not a file")
+    try:
+        size = path.stat().st_size
+        is_hdf5 = h5py.is_hdf5(str(path))
+    except OSError as exc:
+        raise LogError(f"{path}: cannot read ({exc})") from None
+    if size == 0:
+        raise LogDamagedError(path, "not an HDF5 file: it is empty (0 bytes)", salvageable=False)
+    if not is_hdf5:
+        if _looks_like_hdf5_body(path):
+            raise LogDamagedError(
+                path, "not an HDF5 file any more: the HDF5 superblock at its start is destroyed "
+                      "(HDF5 structures follow it, but no HDF5 reader can find them)",
+                salvageable=False)
+        try:
+            with open(path, "rb") as fh:
+                head = fh.read(16)
+        except OSError:
+            head = b""
+        raise LogFormatError(
+            f"{path} is not an HDF5 file (it starts with {head!r}); a ground-station "
+            f"log is the .h5 file `groundstation record` writes")
+    try:
+        f = _open_h5(path)
+    except H5_READ_ERRORS as exc:
+        expected = _superblock_eof(path)
+        if expected is not None and expected > size:
+            raise LogDamagedError(path, truncation_text(size, expected) + " and what is left "
+                                  f"cannot be opened ({exc})", salvageable=False) from None
+        raise LogDamagedError(path, f"the HDF5 file cannot be opened ({exc})",
+                              salvageable=False) from None
+    cut = file_truncation(f, path)
+    if cut is not None and not salvage:
+        f.close()
+        # a recorder may be between writing the superblock and extending the file at a
+        # flush: a file it is still writing is looked at once more before it is called cut
+        f = _open_h5(path)
+        cut = file_truncation(f, path)
+        if cut is not None:
+            f.close()
+            raise LogDamagedError(path, truncation_text(*cut))
+    return f, cut
 
-    def __init__(self, path: str | Path):
+
+class LogReader:
+    """A recorded session, read lazily.  Use as a context manager or call close().
+
+    A damaged file raises LogDamagedError (which names the damage) where it is found:
+    on opening (empty, not HDF5 any more, truncated) or on reading (a dataset or an
+    attribute HDF5 cannot read).  With `salvage=True` a truncated file is opened anyway
+    (`truncated` then says by how much) so that what is readable can be read."""
+
+    def __init__(self, path: str | Path, *, salvage: bool = False):
         self.path = Path(path)
-        if not self.path.exists():
-            raise LogError(f"{self.path}: no such file")
-        if not self.path.is_file():
-            raise LogFormatError(f"{self.path} is not a file")
-        try:
-            is_hdf5 = h5py.is_hdf5(str(self.path))
-        except OSError as exc:
-            raise LogError(f"{self.path}: cannot read ({exc})") from None
-        if not is_hdf5:
-            try:
-                with open(self.path, "rb") as fh:
-                    head = fh.read(16)
-            except OSError:
-                head = b""
-            raise LogFormatError(
-                f"{self.path} is not an HDF5 file (it starts with {head!r}); a ground-station "
-                f"log is the .h5 file `groundstation record` writes")
-        try:
-            self._f = _open_h5(self.path)
-        except OSError as exc:
-            raise LogFormatError(f"{self.path}: the HDF5 file cannot be opened ({exc})") from None
+        self.salvage = salvage
+        self._f, self.truncated = open_log_file(self.path, salvage=salvage)
+        self.unreadable_attrs: list[str] = []
         self._ds: dict[str, h5py.Dataset] = {}
         self._channels: dict[str, list[Channel]] = {}
         self._info: LogInfo | None = None
@@ -259,9 +412,48 @@ class LogReader:
         self._order: dict[str, list[str]] | None = None
         try:
             self.schema_version = self._check()
+        except H5_READ_ERRORS as exc:
+            self._f.close()
+            raise self._damaged(f"its root attributes cannot be read ({exc})",
+                                salvageable=False) from None
         except BaseException:
             self._f.close()
             raise
+
+    # ------------------------------------------------------------------ damage
+    def _damaged(self, what: str, *, salvageable: bool = True) -> LogDamagedError:
+        if self.truncated is not None:
+            what = f"{what}; the file is {truncation_text(*self.truncated)}"
+        return LogDamagedError(self.path, what, salvageable=salvageable)
+
+    def _read(self, path: str, sel) -> np.ndarray:
+        """ds[sel] of the dataset at `path`; LogDamagedError naming the dataset and the
+        first unreadable row if HDF5 cannot read it."""
+        ds = self._dataset(path)
+        try:
+            return ds[sel]
+        except H5_READ_ERRORS as exc:
+            n = ds.shape[0] if ds.shape else 0
+            if isinstance(sel, slice):
+                a, b, _ = sel.indices(n)
+                row, _ = first_unreadable(ds, a, b)
+            elif isinstance(sel, (list, np.ndarray)):
+                row = int(np.min(sel)) if len(sel) else 0
+            else:
+                row = int(sel) if isinstance(sel, (int, np.integer)) else 0
+            where = f"after frame {row}" if row else "from its first frame"
+            raise self._damaged(f"dataset /{path} unreadable {where} (of {n}; {exc})") from None
+
+    @_guard
+    def readable_rows(self, path: str, start: int = 0, stop: int | None = None) -> tuple[int, str]:
+        """(k, error): rows [start, k) of the dataset at `path` read (k == stop and error ''
+        when all of [start, stop) do).  A compressed chunk that was cut off or overwritten
+        fails to decompress; an uncompressed one past the end of a truncated file would
+        read as zeros (the recorder compresses every per-frame dataset)."""
+        ds = self._dataset(path)
+        n = ds.shape[0]
+        stop = n if stop is None else min(stop, n)
+        return first_unreadable(ds, start, stop)
 
     # ------------------------------------------------------------------ file
     def _check(self) -> int:
@@ -303,6 +495,7 @@ class LogReader:
     def __repr__(self) -> str:
         return f"LogReader('{self.path}')"
 
+    @_guard
     def refresh(self) -> None:
         """See what a writer has flushed since the file was opened (or last refreshed).
         Root attributes stay as they were at opening (a clean close shows on reopening)."""
@@ -324,10 +517,21 @@ class LogReader:
         return ds
 
     @property
+    @_guard
     def attrs(self) -> dict[str, Any]:
-        """The root attributes as Python values."""
+        """The root attributes as Python values.  One HDF5 cannot read raises
+        LogDamagedError; with salvage=True it is left out (and named in
+        `unreadable_attrs`)."""
         out = {}
-        for k, v in self._f.attrs.items():
+        for k in self._f.attrs.keys():
+            try:
+                v = self._f.attrs[k]
+            except H5_READ_ERRORS as exc:
+                if not self.salvage:
+                    raise self._damaged(f"attribute '{k}' of / unreadable ({exc})") from None
+                if k not in self.unreadable_attrs:
+                    self.unreadable_attrs.append(k)
+                continue
             out[k] = v.item() if isinstance(v, np.generic) else _text(v) if isinstance(v, bytes) else v
         return out
 
@@ -336,6 +540,7 @@ class LogReader:
         return float(self._f.attrs.get("tick_rate_hz", 1200.0))
 
     # ------------------------------------------------------------------ packets and channels
+    @_guard
     def packets(self) -> list[str]:
         """Packets recorded (every device-to-host packet of the dictionary), by id."""
         tel = self._f["telemetry"]
@@ -367,6 +572,7 @@ class LogReader:
         except (tomllib.TOMLDecodeError, KeyError, TypeError, AttributeError):
             return {}
 
+    @_guard
     def channels(self, packet: str) -> list[Channel]:
         """Every column of `packet`: header counters and times, items, flags, text items,
         then the raw counts (named raw/<item>)."""
@@ -429,6 +635,7 @@ class LogReader:
         return [by_name[c] for c in wanted]
 
     # ------------------------------------------------------------------ sizes and ranges
+    @_guard
     def n_frames(self, packet: str) -> int:
         """Rows of `packet` every header column holds (a live file may be mid-append)."""
         self._packet_group(packet)
@@ -439,20 +646,34 @@ class LogReader:
             raise LogQueryError(f"timebase must be 'device' or 'host', not {timebase!r}")
         return self._dataset(f"telemetry/{packet}/{timebase}_time")
 
+    @_guard
     def origin(self, timebase: str = "device") -> float:
         """The earliest time of any packet in `timebase` (zero of relative ranges)."""
         if timebase not in self._origin:
-            firsts = [float(self._time_ds(p, timebase)[0]) for p in self.packets() if self.n_frames(p)]
+            firsts = []
+            for p in self.packets():
+                if not self.n_frames(p):
+                    continue
+                try:
+                    firsts.append(float(self._time_ds(p, timebase)[0]))
+                except H5_READ_ERRORS:
+                    if not self.salvage:      # salvage: the packets that can say so decide
+                        raise
             self._origin[timebase] = min(firsts) if firsts else 0.0
         return self._origin[timebase]
 
+    @_guard
     def index_range(self, packet: str, start: float | None = None, stop: float | None = None,
-                    timebase: str = "device", *, relative: bool = False) -> tuple[int, int]:
-        """Rows [i0, i1) of `packet` whose time lies in [start, stop] (None: open end)."""
+                    timebase: str = "device", *, relative: bool = False,
+                    limit: int | None = None) -> tuple[int, int]:
+        """Rows [i0, i1) of `packet` whose time lies in [start, stop] (None: open end),
+        among the first `limit` rows only if given (the readable part of a damaged log)."""
         ds = self._time_ds(packet, timebase)
         if start is not None and stop is not None and start > stop:
             raise LogQueryError(f"range start {start} s is after its stop {stop} s")
         n = self.n_frames(packet)
+        if limit is not None:
+            n = max(0, min(n, limit))
         shift = self.origin(timebase) if relative else 0.0
         # times are whole ticks (or arrival stamps); a bound computed as origin + 0.5 s can
         # miss a tick by one rounding step, so bounds admit what is within 1 ns of them
@@ -460,6 +681,7 @@ class LogReader:
         i1 = n if stop is None else _search(ds, n, stop + shift + TIME_TOLERANCE_S, "right")
         return i0, max(i0, i1)
 
+    @_guard
     def tick_index_range(self, packet: str, tick_start: int | None,
                          tick_stop: int | None) -> tuple[int, int]:
         """Rows [i0, i1) whose unwrapped tick lies in [tick_start, tick_stop)."""
@@ -471,6 +693,7 @@ class LogReader:
         i1 = n if tick_stop is None else _search(ds, n, (tick_stop - 0.5) / rate, "left")
         return i0, max(i0, i1)
 
+    @_guard
     def describe_range(self, packet: str, start, stop, timebase: str = "device",
                        relative: bool = False) -> str:
         """'device time 1 .. 2 s (the log holds 0.0008 .. 5 s)' for messages."""
@@ -485,6 +708,7 @@ class LogReader:
                 f"{float(ds[n - 1]) - shift!r} {unit})")
 
     # ------------------------------------------------------------------ reading
+    @_guard
     def read(self, packet: str, channels: str | Iterable[str] | None = None, *,
              start: float | None = None, stop: float | None = None, timebase: str = "device",
              with_time: bool = True, raw: bool = False, relative: bool = False) -> dict[str, np.ndarray]:
@@ -497,6 +721,7 @@ class LogReader:
         i0, i1 = self.index_range(packet, start, stop, timebase, relative=relative)
         return self._read_rows(packet, chans, i0, i1, raw=raw, with_time=with_time)
 
+    @_guard
     def read_ticks(self, packet: str, channels: str | Iterable[str] | None, tick_start: int | None,
                    tick_stop: int | None, *, with_time: bool = True, raw: bool = False) -> dict[str, np.ndarray]:
         """Like read() for unwrapped device ticks (device_time * tick rate) in
@@ -505,6 +730,7 @@ class LogReader:
         i0, i1 = self.tick_index_range(packet, tick_start, tick_stop)
         return self._read_rows(packet, chans, i0, i1, raw=raw, with_time=with_time)
 
+    @_guard
     def read_rows(self, packet: str, channels: str | Iterable[str] | None, i0: int, i1: int | None,
                   *, with_time: bool = True, raw: bool = False) -> dict[str, np.ndarray]:
         """Like read() for row indices [i0, i1)."""
@@ -521,19 +747,19 @@ class LogReader:
         base = f"telemetry/{packet}"
         out: dict[str, np.ndarray] = {}
         if with_time:
-            out["device_time"] = self._dataset(f"{base}/device_time")[i0:i1]
-            out["host_time"] = self._dataset(f"{base}/host_time")[i0:i1]
+            out["device_time"] = self._read(f"{base}/device_time", slice(i0, i1))
+            out["host_time"] = self._read(f"{base}/host_time", slice(i0, i1))
         for ch in chans:
             if ch.kind == "text":
                 out[ch.name] = self._stream_records(f"{base}/{ch.name}", i0, i1,
                                                     decode=ch.encoding == "utf-8" and not raw)
             elif raw and ch.has_raw:
-                out[ch.name] = self._dataset(f"{base}/raw/{ch.name}")[i0:i1]
+                out[ch.name] = self._read(f"{base}/raw/{ch.name}", slice(i0, i1))
             elif ch.from_raw:
-                out[ch.name] = _to_engineering(self._dataset(f"{base}/raw/{ch.name}")[i0:i1],
+                out[ch.name] = _to_engineering(self._read(f"{base}/raw/{ch.name}", slice(i0, i1)),
                                                ch.conversion)
             else:
-                out[ch.name] = self._dataset(f"{base}/{ch.name}")[i0:i1]
+                out[ch.name] = self._read(f"{base}/{ch.name}", slice(i0, i1))
         short = min((len(v) for v in out.values()), default=0)
         if any(len(v) != short for v in out.values()):   # a writer was mid-append: cut to the common rows
             out = {k: v[:short] for k, v in out.items()}
@@ -541,8 +767,8 @@ class LogReader:
 
     def _stream_records(self, path: str, i0: int, i1: int, decode: bool) -> np.ndarray:
         """Records [i0, i1) of a byte stream group as an object array of bytes (or str)."""
-        offsets = self._dataset(f"{path}/offset")[i0:i1].astype(np.int64)
-        lengths = self._dataset(f"{path}/length")[i0:i1].astype(np.int64)
+        offsets = self._read(f"{path}/offset", slice(i0, i1)).astype(np.int64)
+        lengths = self._read(f"{path}/length", slice(i0, i1)).astype(np.int64)
         k = min(len(offsets), len(lengths))
         offsets, lengths = offsets[:k], lengths[:k]
         out = np.empty(k, dtype=object)
@@ -557,13 +783,14 @@ class LogReader:
             if not k:
                 return out
             hi = int((offsets + lengths).max())
-        blob = data_ds[lo:hi].tobytes()
+        blob = self._read(f"{path}/data", slice(lo, hi)).tobytes()
         rel = offsets - lo
         # one Python object per record is the result type; text packets are rare
         records = [blob[o:o + n] for o, n in zip(rel.tolist(), lengths.tolist())]
         out[:] = [r.decode("utf-8", errors="replace") for r in records] if decode else records
         return out
 
+    @_guard
     def frames(self, packet: str, start_index: int = 0, stop_index: int | None = None):
         """The frames [start_index, stop_index) as received, header to CRC: an (n,
         frame_length) uint8 array for fixed-length packets (row i is frame i), a list of
@@ -576,10 +803,11 @@ class LogReader:
         stop_index = n if stop_index is None else min(stop_index, n)
         start_index = max(0, min(start_index, stop_index))
         if "data" in fg:
-            return self._dataset(f"frames/{packet}/data")[start_index:stop_index]
+            return self._read(f"frames/{packet}/data", slice(start_index, stop_index))
         return list(self._stream_records(f"frames/{packet}/stream", start_index, stop_index,
                                          decode=False))
 
+    @_guard
     def is_variable(self, packet: str) -> bool:
         self._packet_group(packet)
         return "data" not in self._f["frames"][packet]
@@ -593,7 +821,7 @@ class LogReader:
         idx, missing, dups = [], [], 0
         prev = None
         for a in range(0, n, _SCAN_ROWS):
-            seq = ds[a:min(n, a + _SCAN_ROWS)].astype(np.int64)
+            seq = self._read(f"telemetry/{packet}/sequence", slice(a, min(n, a + _SCAN_ROWS))).astype(np.int64)
             before = np.concatenate(([seq[0] - 1 if prev is None else prev], seq[:-1]))
             step = (seq - before) % SEQ_MOD
             lost = (step > 1) & (step < SEQ_MOD // 2)
@@ -606,6 +834,7 @@ class LogReader:
             return np.zeros(0, np.int64), np.zeros(0, np.int64), 0
         return np.concatenate(idx), np.concatenate(missing), dups
 
+    @_guard
     def gaps(self, packet: str) -> dict[str, np.ndarray]:
         """Sequence gaps of `packet`: index (row of the first frame after the gap),
         missing (frames lost there), device_time and host_time of that frame."""
@@ -613,12 +842,13 @@ class LogReader:
         base = f"telemetry/{packet}"
         if len(idx):
             rows = idx.tolist()
-            dev = self._dataset(f"{base}/device_time")[rows]
-            host = self._dataset(f"{base}/host_time")[rows]
+            dev = self._read(f"{base}/device_time", rows)
+            host = self._read(f"{base}/host_time", rows)
         else:
             dev = host = np.zeros(0)
         return {"index": idx, "missing": missing, "device_time": dev, "host_time": host}
 
+    @_guard
     def summary(self) -> LogInfo:
         """Root attributes and per-packet statistics (reads each sequence column once)."""
         a = self.attrs
@@ -630,7 +860,9 @@ class LogReader:
             if n:
                 dev = self._dataset(f"{base}/device_time")
                 host = self._dataset(f"{base}/host_time")
-                fd, ld, fh, lh = float(dev[0]), float(dev[n - 1]), float(host[0]), float(host[n - 1])
+                ends = [0, n - 1] if n > 1 else [0]
+                dev, host = self._read(f"{base}/device_time", ends), self._read(f"{base}/host_time", ends)
+                fd, ld, fh, lh = float(dev[0]), float(dev[-1]), float(host[0]), float(host[-1])
             else:
                 fd = ld = fh = lh = None
             idx, missing, dups = self._scan_sequence(name)
@@ -674,6 +906,7 @@ class LogReader:
         return self._info
 
     # ------------------------------------------------------------------ the rest of the file
+    @_guard
     def journal(self, kinds: str | Iterable[str] | None = None) -> list[JournalRecord]:
         """Journal records (notes, commands, events, parameter tables, profiles, ...) in
         the order written, optionally only the given kinds."""
@@ -691,7 +924,8 @@ class LogReader:
         n = min(t_ds.shape[0], k_ds.shape[0],
                 *(self._dataset(f"journal/{s}/{c}").shape[0] for s in ("text", "blob")
                   for c in ("offset", "length")))
-        times, kind_idx = t_ds[:n], k_ds[:n].astype(np.int64)
+        times = self._read("journal/time", slice(0, n))
+        kind_idx = self._read("journal/kind", slice(0, n)).astype(np.int64)
         if kinds is not None:
             wanted = np.array([names.index(k) for k in kinds], dtype=np.int64)
             rows = np.flatnonzero(np.isin(kind_idx, wanted))
@@ -707,12 +941,14 @@ class LogReader:
         return [JournalRecord(float(times[r]), label[kind_idx[r]], json.loads(texts[r - lo]),
                               blobs[r - lo]) for r in rows.tolist()]
 
+    @_guard
     def protocol_files(self) -> dict[str, str]:
         """The protocol TOML files as recorded: name -> text."""
         proto = self._f["protocol"]
         return {name: _text(proto[name][()]) for name in proto.keys()
                 if isinstance(proto[name], h5py.Dataset)}
 
+    @_guard
     def testbed(self) -> tuple[str, str, str]:
         """(name, path, text) of the testbed configuration recorded ('' where unknown)."""
         tb = self._f.get("testbed")

@@ -51,7 +51,8 @@ import numpy as np
 from ..codec import FrameCodec, TelemetryBlock
 from ..dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, PacketDef, load_dictionary
 from ..errors import GroundStationError
-from .reader import LogError
+from .reader import (H5_READ_ERRORS, LogDamagedError, LogError, LogFormatError, first_unreadable,
+                     open_log_file)
 from ..link.stats import LinkStatistics
 from . import schema
 
@@ -67,6 +68,20 @@ class ReplayError(LogError):
     """A log cannot be replayed (missing file, not a log, unreadable protocol, ...)."""
 
 
+class ReplayDamagedError(LogDamagedError, ReplayError):
+    """The log is damaged (truncated, overwritten, empty): both a ReplayError and a
+    LogDamagedError, whose message says what is damaged and what to do."""
+
+
+def _unreadable(ds: h5py.Dataset, start: int, stop: int, exc: BaseException) -> ReplayDamagedError:
+    """The error for a failed read of rows [start, stop) of `ds`, naming the first
+    unreadable row."""
+    row, _ = first_unreadable(ds, start, stop)
+    where = f"after frame {row}" if row else "from its first frame"
+    return ReplayDamagedError(Path(ds.file.filename),
+                              f"dataset {ds.name} unreadable {where} (of {ds.shape[0]}; {exc})")
+
+
 # ---------------------------------------------------------------------- opening
 def _open_log(path: Path) -> h5py.File:
     if not path.exists():
@@ -74,13 +89,16 @@ def _open_log(path: Path) -> h5py.File:
     if path.is_dir():
         raise ReplayError(f"{path} is a folder, not a log file - choose one of the .h5 files in it")
     try:
-        f = h5py.File(path, "r", swmr=True)
-    except OSError:
+        f, _ = open_log_file(path)
+    except LogDamagedError as exc:
         try:          # not written in the SWMR format (e.g. converted): read it plainly
             f = h5py.File(path, "r")
-        except OSError as exc:
-            raise ReplayError(f"{path} is not an HDF5 file or is damaged ({exc}) - "
-                              f"a ground-station log is an .h5 file written by the recorder") from None
+        except OSError:
+            raise ReplayDamagedError(path, exc.what, salvageable=exc.salvageable) from None
+    except LogFormatError as exc:        # not HDF5 at all
+        raise ReplayError(str(exc)) from None
+    except LogError as exc:
+        raise ReplayError(str(exc)) from None
     try:
         found = f.attrs.get("schema")
         if isinstance(found, bytes):
@@ -151,6 +169,13 @@ class _Track:
 
     def update_rows(self) -> None:
         """Rows complete in every dataset (a growing log may show them one by one)."""
+        try:
+            self._update_rows()
+        except H5_READ_ERRORS as exc:
+            ds = self.data_ds if self.fixed else self.off_ds
+            raise _unreadable(ds, max(0, ds.shape[0] - 1), ds.shape[0], exc) from None
+
+    def _update_rows(self) -> None:
         if self.fixed:
             n = min(self.data_ds.shape[0], self.host_ds.shape[0], self.dev_ds.shape[0])
         else:
@@ -189,8 +214,8 @@ class _Track:
         start, stop = self.loaded, min(self.limit, self.loaded + self.chunk_rows)
         if stop <= start:
             return False
-        host = self.host_ds[start:stop]
-        dev = self.dev_ds[start:stop]
+        host = self._rows(self.host_ds, start, stop)
+        dev = self._rows(self.dev_ds, start, stop)
         keys = np.maximum.accumulate(np.maximum(host, self.key_carry))
         self.key_carry = float(keys[-1])
         self.buf_keys = np.concatenate((self.buf_keys, keys))
@@ -207,14 +232,21 @@ class _Track:
         self.buf_row += count
         return row, keys, dev, host
 
+    @staticmethod
+    def _rows(ds: h5py.Dataset, start: int, stop: int) -> np.ndarray:
+        try:
+            return ds[start:stop]
+        except H5_READ_ERRORS as exc:
+            raise _unreadable(ds, start, stop, exc) from None
+
     def read(self, row: int, count: int) -> np.ndarray | list[bytes]:
         """The raw frames of rows [row, row + count)."""
         if self.fixed:
-            return self.data_ds[row:row + count]
-        off = self.off_ds[row:row + count].astype(np.int64)
-        ln = self.len_ds[row:row + count].astype(np.int64)
+            return self._rows(self.data_ds, row, row + count)
+        off = self._rows(self.off_ds, row, row + count).astype(np.int64)
+        ln = self._rows(self.len_ds, row, row + count).astype(np.int64)
         base = int(off[0])
-        blob = self.data_ds[base:int(off[-1] + ln[-1])].tobytes()
+        blob = self._rows(self.data_ds, base, int(off[-1] + ln[-1])).tobytes()
         return [blob[o - base:o - base + n] for o, n in zip(off.tolist(), ln.tolist())]
 
 
@@ -229,7 +261,10 @@ def _bisect_ds(ds: h5py.Dataset, n: int, value: float, right: bool = False) -> i
             return n
 
     fn = bisect.bisect_right if right else bisect.bisect_left
-    return fn(_View(), value)  # type: ignore[arg-type]
+    try:
+        return fn(_View(), value)  # type: ignore[arg-type]
+    except H5_READ_ERRORS as exc:
+        raise _unreadable(ds, 0, n, exc) from None
 
 
 # ---------------------------------------------------------------------- merged windows
@@ -292,7 +327,8 @@ class _LogReader:
         t = self.main_track
         if not t.n_rows:
             return None
-        return float(t.dev_ds[0]), float(t.dev_ds[t.n_rows - 1])
+        ends = t._rows(t.dev_ds, 0, 1), t._rows(t.dev_ds, t.n_rows - 1, t.n_rows)
+        return float(ends[0][0]), float(ends[1][0])
 
     def refresh(self) -> bool:
         """Look for rows appended since the last look (a log still being written)."""
@@ -312,14 +348,14 @@ class _LogReader:
         r = _bisect_ds(main.dev_ds, main.n_rows, device_time)
         if r >= main.n_rows:
             return [t.n_rows for t in self.tracks], None
-        key = float(main.host_ds[r])
+        key = float(main._rows(main.host_ds, r, r + 1)[0])
         rows = []
         for t in self.tracks:
             if t is main:
                 rows.append(r)
             else:   # frames of t that sort before (key, main rank, r) in the merge
                 rows.append(_bisect_ds(t.host_ds, t.n_rows, key, right=t.rank < main.rank))
-        return rows, float(main.dev_ds[r])
+        return rows, float(main._rows(main.dev_ds, r, r + 1)[0])
 
     def reset(self, rows: list[int] | None = None, stops: list[int] | None = None) -> None:
         for i, t in enumerate(self.tracks):
@@ -459,6 +495,7 @@ class ReplaySource:
         self.stats = LinkStatistics(self.dictionary.control_rate_hz)
         self.link_state = "up"
         self.link_error = ""
+        self.error: Exception | None = None     # what stopped the replay ('lost'), if anything
         self.subscriber_errors = 0
         self.frames_delivered = 0
         self._subscribers: list[Callable[[TelemetryBlock], None]] = []
@@ -622,8 +659,15 @@ class ReplaySource:
         try:
             self._loop()
         except Exception as exc:  # a damaged or vanished file: say so, keep the app running
-            msg = f"replay of {self.path.name} stopped: {type(exc).__name__}: {exc}"
-            log.exception(msg)
+            self.error = exc
+            if isinstance(exc, GroundStationError):
+                # says what and where, and the consumer gets it (`error`, the 'lost'
+                # listener): no traceback, and nothing on a terminal beside its report
+                msg = f"replay of {self.path.name} stopped: {exc}"
+                log.info(msg)
+            else:
+                msg = f"replay of {self.path.name} stopped: {type(exc).__name__}: {exc}"
+                log.exception(msg)
             self.link_error = msg
             self.link_state = "lost"
             with self._cv:

@@ -1,0 +1,55 @@
+"""Output files that appear whole or not at all.
+
+An export or a re-decoded log is written to a hidden temporary file in the target's
+folder and renamed over the target only once it is complete (a rename within one folder
+is atomic).  Whatever goes wrong on the way - the input turns out to be damaged, the
+disk fills, Ctrl-C - the temporary file is deleted and an earlier file of that name is
+left as it was.
+"""
+
+from __future__ import annotations
+
+import os
+import secrets
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Iterator
+
+
+def _describe(exc: OSError) -> str:
+    return exc.strerror or str(exc)
+
+
+@contextmanager
+def atomic_output(path: str | Path, error_cls: type[Exception]) -> Iterator[Path]:
+    """Yield a temporary path beside `path`; on success rename it to `path`, on any
+    exception delete it.  An OSError creating, completing or renaming the temporary
+    file raises `error_cls("cannot write PATH: reason")`; other exceptions (a read error
+    of the input, for one) pass through unchanged."""
+    path = Path(path)
+    while True:
+        tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.part"
+        try:
+            # O_EXCL: never reuse someone else's file; 0o666 lets the umask decide the
+            # final file's permissions, as for a file written directly
+            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise error_cls(f"cannot write {path}: {_describe(exc)}") from None
+        os.close(fd)
+        break
+    try:
+        yield tmp
+        os.replace(tmp, path)
+    except BaseException as exc:
+        try:
+            tmp.unlink()
+        except FileNotFoundError:
+            pass
+        if isinstance(exc, OSError):
+            raise error_cls(f"cannot write {path}: {_describe(exc)}") from None
+        raise
+
+
+__all__ = ["atomic_output"]
