@@ -98,20 +98,22 @@ def only_log(folder: Path) -> Path:
     return files[0]
 
 
-def test_ctrl_c_ends_a_recording_cleanly(live_device, tmp_path):
+@pytest.mark.parametrize("sig, reason", [(signal.SIGINT, "interrupted by the operator (Ctrl-C)"),
+                                         (signal.SIGTERM, "terminated (SIGTERM)")])
+def test_ctrl_c_or_sigterm_ends_a_recording_cleanly(live_device, tmp_path, sig, reason):
     cli = Cli("record", "--device", f"tcp://127.0.0.1:{live_device.tcp_port}",
               "--folder", str(tmp_path))
     try:
         cli.wait_for_line(" frames, ")                # recording, with frames flowing
-        os.killpg(cli.proc.pid, signal.SIGINT)        # as the terminal does: the whole group
+        os.killpg(cli.proc.pid, sig)                  # as the terminal does: the whole group
         code, out, err = cli.finish()
     finally:
         cli.kill()
     assert code == 0, (out, err)
     assert "Traceback" not in err and "free space" not in out + err
-    assert "interrupted by the operator (Ctrl-C)" in out
+    assert reason in out
     stop = closing_record(only_log(tmp_path))
-    assert stop["reason"] == "interrupted by the operator (Ctrl-C)"
+    assert stop["reason"] == reason
     assert stop["frames"] > 0
     assert live_device.firmware.session_token is None          # the session was ended
 

@@ -436,17 +436,18 @@ def test_udp_batches_keep_each_datagrams_arrival_time():
     rx = UdpReceiver("127.0.0.1", 0)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
-        sent_at = time.time()
         for i in range(5):
             tx.sendto(bytes([i]) * 10, (rx.host, rx.port))
+        # on loopback a datagram is in the receiver's queue when sendto returns
+        before_receive = time.time()
         datagrams, times = rx.receive(1.0, coalesce_s=0.3)
-        returned_at = time.time()
     finally:
         tx.close()
         rx.close()
     assert [d[0] for d in datagrams] == [0, 1, 2, 3, 4]
     assert times == sorted(times)
     if rx.kernel_timestamps:
-        # stamped on arrival, before the 0.3 s batching wait, not when drained after it
-        assert times[-1] < returned_at - 0.25
+        # stamped on arrival, before receive() was even called - not when drained after
+        # its 0.3 s batching wait (an order of events, so it holds on a busy machine too)
+        assert times[-1] <= before_receive
     assert times[0] >= sent_at - 1.0

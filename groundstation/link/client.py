@@ -102,6 +102,8 @@ class DeviceClient:
         self._heartbeat_enabled = heartbeat
         self._heartbeat_thread: threading.Thread | None = None
         self._session_stop = threading.Event()
+        self._draining = threading.Event()
+        self._drained = threading.Event()
         self.session_token: int | None = None
         self.device_info: dict[str, Any] = {}
         self.link_state = "closed"
@@ -207,6 +209,8 @@ class DeviceClient:
             datagrams, times = self.intake.datagrams(datagrams, times, sources)
             if datagrams:
                 self._dispatch(self._datagrams.decode(datagrams, times), "datagram")
+            elif self._draining.is_set():
+                self._drained.set()         # nothing left in the socket after the session ended
 
     def _lost(self, message: str) -> None:
         log.error("link lost: %s", message)
@@ -442,6 +446,11 @@ class DeviceClient:
         except GroundStationError as exc:
             log.warning("disconnect on close failed: %s", exc)
         self._session_stop.set()
+        if self.telemetry is not None and self._threads and self.link_state == "up":
+            # the device stopped its telemetry at DISCONNECT; what it sent before is still
+            # in the socket: let the reader hand it on before the socket closes
+            self._draining.set()
+            self._drained.wait(0.5)
         self._stop.set()
         self.command_link.close()
         if self.telemetry is not None:

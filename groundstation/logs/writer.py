@@ -29,9 +29,10 @@ from .h5file import LogFile
 
 
 def ignore_terminal_interrupt() -> None:
-    """SIGINT ignored in this process (and, inherited, in processes it spawns)."""
+    """SIGINT and SIGTERM ignored in this process (the writer: see writer_main)."""
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
     except ValueError:          # not the main thread of the process: nothing to do here
         pass
 
@@ -43,8 +44,10 @@ def _explain(exc: BaseException, path: Path) -> str:
 
 def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> None:
     """Entry point of the writer process (multiprocessing 'spawn')."""
-    # Ctrl-C in a terminal reaches the whole process group.  The writer must not die of
-    # it: the parent decides how the recording ends and tells it to close ("stop").
+    # Ctrl-C in a terminal, or a SIGTERM to the process group (a service manager, `kill
+    # -TERM -PGID`), reaches the writer too.  It must not die of it: the parent decides
+    # how the recording ends and tells it to close ("stop"); if the parent is gone, the
+    # writer notices (below) and closes the file itself.
     ignore_terminal_interrupt()
     d = load_dictionary(protocol_dir)
     codec = FrameCodec(d)
