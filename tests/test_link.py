@@ -436,6 +436,7 @@ def test_udp_batches_keep_each_datagrams_arrival_time():
     rx = UdpReceiver("127.0.0.1", 0)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
+        sent_at = time.time()
         for i in range(5):
             tx.sendto(bytes([i]) * 10, (rx.host, rx.port))
         # on loopback a datagram is in the receiver's queue when sendto returns
