@@ -12,13 +12,20 @@ client records when each HIGH_RATE frame arrives against its tick, and we report
 lateness distribution (arrival - (t0 + tick/1200), t0 fitted as the earliest possible)
 and the simulator process's CPU use from /proc.
 
-Run: .venv/bin/python benchmarks/bench_sim.py [--paced-seconds 60]
+Speed factor (--speed-seconds, default 1; moved here from tests/test_sim_speed.py,
+which now checks the pacing law on a controlled clock): device ticks per wall second of
+the paced simulator at `speed` 1 and 5, in this process and as `groundstation sim
+--speed 5`, against 1200 x speed; the tolerance is 0.85-1.1 (in process) and 0.8-1.2
+(the process, measured on frame arrivals).
+
+Run: .venv/bin/python benchmarks/bench_sim.py [--paced-seconds 60] [--speed-seconds 1]
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import threading
 import time
 import zlib
 from pathlib import Path
@@ -153,10 +160,64 @@ def paced_mode(d, seconds: float) -> dict:
             "paced_sim_cpu_percent": 100 * cpu}
 
 
+def _tick_rate(dev: SimulatedDevice, warmup: float, span: float) -> float:
+    """Device ticks per wall second, measured after a short warm-up."""
+    time.sleep(warmup)
+    t0, k0 = time.monotonic(), dev.firmware.tick
+    time.sleep(span)
+    t1, k1 = time.monotonic(), dev.firmware.tick
+    return (k1 - k0) / (t1 - t0)
+
+
+def _process_tick_rate(d, speed: float, span: float) -> float:
+    """`groundstation sim --speed S`: ticks per wall second over the last `span` s of
+    frame arrivals (host time)."""
+    lock = threading.Lock()
+    ticks: list[np.ndarray] = []
+    hosts: list[float] = []
+
+    def on_block(block):
+        if block.name == "HIGH_RATE":
+            with lock:
+                ticks.append(np.asarray(block["tick"], dtype=np.int64))
+                hosts.append(float(np.max(block.host_time)))
+
+    with SimulatorProcess(speed=speed) as address:
+        client = open_client(d, address)
+        try:
+            client.subscribe(on_block)
+            client.connect()
+            time.sleep(span + 0.2)
+        finally:
+            client.close()
+    with lock:
+        k = np.concatenate(ticks)
+        h = np.array(hosts)
+    keep = h >= h[-1] - span
+    first = int(np.argmax(keep))
+    sizes = np.cumsum([len(t) for t in ticks])
+    return float((k[-1] - k[sizes[first] - 1]) / (h[-1] - h[first]))
+
+
+def speed_factor(d, span: float) -> dict:
+    out = {}
+    for speed in (1.0, 5.0):
+        with SimulatedDevice(d, pacing="realtime", speed=speed) as dev:
+            rate = _tick_rate(dev, 0.2, span)
+            out[f"speed{speed:g}_ticks_per_s"] = rate
+            out[f"speed{speed:g}_ratio"] = rate / (RATE * speed)
+            out[f"speed{speed:g}_overruns"] = int(dev.firmware.overruns)
+    rate = _process_tick_rate(d, 5.0, span)
+    out["process_speed5_ticks_per_s"] = rate
+    out["process_speed5_ratio"] = rate / (RATE * 5.0)
+    return out
+
+
 def main() -> dict:
     ap = argparse.ArgumentParser()
     ap.add_argument("--fast-seconds", type=float, default=60.0)
     ap.add_argument("--paced-seconds", type=float, default=60.0)
+    ap.add_argument("--speed-seconds", type=float, default=1.0)
     args = ap.parse_args()
     d = load_dictionary()
     res = {"machine": machine()}
@@ -175,6 +236,17 @@ def main() -> dict:
               f"{res['paced_lateness_ms_p99']:.2f} ms  max {res['paced_lateness_ms_max']:.2f} ms"
               f"   (target p99 < 5 ms)")
         print(f"  simulator CPU {res['paced_sim_cpu_percent']:.0f} % of one core")
+    if args.speed_seconds > 0:
+        res.update(speed_factor(d, args.speed_seconds))
+        print(f"speed factor (paced, {args.speed_seconds:g} s each; tolerance 0.85-1.1, process 0.8-1.2):")
+        for speed in (1, 5):
+            ratio = res[f"speed{speed}_ratio"]
+            print(f"  speed {speed}: {res[f'speed{speed}_ticks_per_s']:8.0f} ticks/s = {ratio:.3f} x "
+                  f"{RATE * speed:.0f}, overruns {res[f'speed{speed}_overruns']}"
+                  f"{'' if 0.85 <= ratio <= 1.1 else '   OUTSIDE TOLERANCE'}")
+        ratio = res["process_speed5_ratio"]
+        print(f"  sim --speed 5 (process): {res['process_speed5_ticks_per_s']:8.0f} ticks/s = "
+              f"{ratio:.3f} x {RATE * 5:.0f}{'' if 0.8 <= ratio <= 1.2 else '   OUTSIDE TOLERANCE'}")
     save("sim", res)
     return res
 

@@ -1,11 +1,15 @@
 """The paced simulator's speed factor: `speed` control periods per 1/1200 s of wall time,
-ticks still one per period; the default (1.0) leaves everything as it was."""
+ticks still one per period; the default (1.0) leaves everything as it was.
+
+These tests do not depend on how fast the machine is: the pacing law is checked against
+a controlled clock, and the process test checks what is streamed, not how quickly.  The
+achieved tick rate against the wall clock is measured by `benchmarks/bench_sim.py`
+("speed factor"), which prints it beside its tolerance."""
 
 from __future__ import annotations
 
 import math
 import threading
-import time
 
 import numpy as np
 import pytest
@@ -16,15 +20,6 @@ from groundstation.sim import SimulatedDevice
 from groundstation.sim.process import SimulatorProcess
 
 RATE = 1200.0
-
-
-def _tick_rate(dev: SimulatedDevice, warmup: float = 0.2, span: float = 0.8) -> float:
-    """Device ticks per wall second, measured after a short warm-up."""
-    time.sleep(warmup)
-    t0, k0 = time.monotonic(), dev.firmware.tick
-    time.sleep(span)
-    t1, k1 = time.monotonic(), dev.firmware.tick
-    return (k1 - k0) / (t1 - t0)
 
 
 def test_default_speed_is_one(dictionary):
@@ -38,18 +33,51 @@ def test_speed_must_be_finite_and_positive(dictionary, bad):
         SimulatedDevice(dictionary, speed=bad)
 
 
-def test_speed_five_runs_five_times_the_control_rate(dictionary):
-    with SimulatedDevice(dictionary, pacing="realtime", speed=5.0) as dev:
-        rate = _tick_rate(dev)
-        overruns = dev.firmware.overruns
-    assert 0.85 * 5 * RATE < rate < 1.1 * 5 * RATE, rate
-    assert overruns == 0
+class FakeClock:
+    """time.monotonic for the device module: moves only when the test says so."""
+
+    def __init__(self) -> None:
+        self.now = 1000.0
+
+    def __call__(self) -> float:
+        return self.now
 
 
-def test_speed_one_keeps_the_control_rate(dictionary):
-    with SimulatedDevice(dictionary, pacing="realtime") as dev:
-        rate = _tick_rate(dev, span=0.5)
-    assert 0.85 * RATE < rate < 1.1 * RATE, rate
+@pytest.mark.parametrize("speed", [1.0, 5.0, 0.5])
+def test_pacing_runs_speed_periods_per_period_of_wall_time(dictionary, monkeypatch, speed):
+    """The pacing law itself, on a controlled clock: after t seconds of wall time the
+    device has run exactly floor(t * 1200 * speed) control periods, one tick each, with
+    no overrun."""
+    from groundstation.sim import device as device_module
+
+    clock = FakeClock()
+    monkeypatch.setattr(device_module.time, "monotonic", clock)
+    dev = SimulatedDevice(dictionary, pacing="realtime", speed=speed)
+    dev._t0, dev._ticks_done = clock.now, 0              # what the tick loop does at start
+    tick0 = dev.firmware.tick
+    for step_s in (0.01, 0.1, 0.0005, 0.25, 0.05):
+        clock.now += step_s
+        dev._catch_up()
+        elapsed = clock.now - dev._t0
+        expected = int(elapsed * RATE * speed)
+        assert dev.firmware.tick - tick0 == expected == dev._ticks_done, (elapsed, speed)
+    assert dev.firmware.overruns == 0
+
+
+def test_pacing_that_falls_behind_skips_and_counts_overruns(dictionary, monkeypatch):
+    """A machine too busy to keep up: at most half a second of periods runs at once, the
+    rest is skipped and counted as overruns (ticks still one per period run)."""
+    from groundstation.sim import device as device_module
+
+    clock = FakeClock()
+    monkeypatch.setattr(device_module.time, "monotonic", clock)
+    dev = SimulatedDevice(dictionary, pacing="realtime", speed=5.0)
+    dev._t0, dev._ticks_done = clock.now, 0
+    tick0 = dev.firmware.tick
+    clock.now += 2.0                                     # 12 000 periods due at once
+    dev._catch_up()
+    assert dev.firmware.tick - tick0 == int(RATE * 5.0 // 2)
+    assert dev.firmware.overruns == 12000 - int(RATE * 5.0 // 2)
 
 
 def test_cli_and_process_pass_the_speed_through():
@@ -64,37 +92,36 @@ def test_cli_and_process_pass_the_speed_through():
 
 
 def test_simulator_process_streams_exact_ticks_at_speed(dictionary):
-    """End to end: `groundstation sim --speed 5` streams one HIGH_RATE frame per tick,
-    5 x 1200 ticks per wall second."""
+    """End to end: `groundstation sim --speed 5` streams one HIGH_RATE frame per tick:
+    ticks and sequence numbers advance together (a frame lost on the link skips both
+    alike), in order, never repeated.  How many ticks per wall second it achieves is
+    bench_sim.py's to measure."""
+    wanted = 3000
     ticks: list[np.ndarray] = []
-    hosts: list[float] = []
+    seqs: list[np.ndarray] = []
     lock = threading.Lock()
+    enough = threading.Event()
 
     def on_block(block):
         if block.name == "HIGH_RATE":
             with lock:
                 ticks.append(np.asarray(block["tick"], dtype=np.int64))
-                hosts.append(float(np.max(block.host_time)))
+                seqs.append(np.asarray(block["sequence"], dtype=np.int64))
+                if sum(len(t) for t in ticks) >= wanted:
+                    enough.set()
 
     with SimulatorProcess(speed=5.0) as address:
         client = open_client(dictionary, address)
         try:
             client.subscribe(on_block)
             client.connect()
-            time.sleep(1.2)
+            # a deadline only against a hung simulator: at speed 5 this takes ~0.5 s
+            assert enough.wait(120.0), "the simulator streamed fewer than 3000 frames in 120 s"
         finally:
             client.close()
     with lock:
         k = np.concatenate(ticks)
-        h = np.array(hosts)
-    assert len(k) > 3000, len(k)
-    steps = np.diff(k)
-    assert (steps >= 1).all()                  # in order, never repeated
-    assert np.mean(steps == 1) > 0.99          # one frame per tick (loopback UDP: ~no loss)
-    # the device clock against the host's, over the last second of arrivals
-    keep = h >= h[-1] - 1.0
-    first = int(np.argmax(keep))
-    sizes = np.cumsum([len(t) for t in ticks])
-    k_first = k[sizes[first] - 1]
-    rate = (k[-1] - k_first) / (h[-1] - h[first])
-    assert 0.8 * 5 * RATE < rate < 1.2 * 5 * RATE, rate
+        q = np.concatenate(seqs)
+    assert len(k) >= wanted
+    assert (np.diff(k) >= 1).all()                       # in order, never repeated
+    assert (np.diff(k) == np.diff(q)).all()              # one frame per tick
