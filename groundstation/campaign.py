@@ -28,6 +28,11 @@ Text values may use {campaign}, {run} (1, 2, ...), every matrix key, and {KEY_st
 (the file name of a path without its extension).  Values naming files (`design`,
 `profile`, `psd`) are relative to the campaign file.
 
+`load_campaign` checks every step of every run before anything runs - the structure,
+then every value against the protocol dictionary, the testbed's limits and the 4053B
+generator's, and that every referenced file loads - and raises CampaignError listing
+every problem ("FILE: run 2 step 4 (dwell): seconds = -5 - must be a finite number > 0").
+
 On any failure or an abort the session is made safe (ABORT, generator off, recording
 closed) and the report says which step stopped and why.  `resume` re-runs the setup
 steps (they build the state a run needs), skips the runs that completed, and starts the

@@ -59,13 +59,23 @@ def add_parsers(sub) -> argparse._SubParsersAction:
     s.add_argument("--log-folder", default=None, help="where the logs go (default logs/CAMPAIGN)")
     s.add_argument("--report", default=None, help="report file (default: LOG_FOLDER/report.json)")
     s.add_argument("--resume", default=None, help="a report of a failed run: continue from its failed run")
-    s.add_argument("--max-step-seconds", type=float, default=None,
+    s.add_argument("--max-step-seconds", type=_positive_seconds, default=None,
                    help="cap every dwell and profile at S seconds (trial runs and tests; "
                         "a base-motion profile keeps its period)")
     s.add_argument("--seed", type=int, default=0, help="simulator seed")
     s.add_argument("--take-over", action="store_true", help="end another host's session")
     s.set_defaults(func=_cmd_run)
     return actions
+
+
+def _positive_seconds(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = float("nan")
+    if not (value > 0 and value != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, not {text!r}")
+    return value
 
 
 def _cmd_show(args) -> int:

@@ -365,8 +365,12 @@ class Testbed:
                        testbed_text=tb.path.read_text(), testbed_name=tb.name,
                        testbed_path=str(tb.path))
         path = rec.start()
-        self._detach_recorder = attach_recorder(self.client, rec)
-        self.recorder = rec
+        try:
+            self._detach_recorder = attach_recorder(self.client, rec)
+        finally:
+            # ours from here on, so that make_safe closes it with its reason even when a
+            # Ctrl-C lands in the middle of this step
+            self.recorder = rec
         self._drops_at_start = self._link_drops()
         self._recording_t0 = time.monotonic()
         # every log carries the table the device runs, whatever was uploaded before

@@ -288,3 +288,9 @@ def test_help_documents_exit_status_130(capsys):
         build_parser().parse_args(["campaign", "run", "--help"])
     out = capsys.readouterr().out
     assert "130" in out and "Ctrl-C" in out and "--resume" in out
+
+
+@pytest.mark.parametrize("bad", ["-1", "0", "nan", "inf", "ten"])
+def test_max_step_seconds_must_be_positive(bad):
+    with pytest.raises(SystemExit):
+        build_parser().parse_args(["campaign", "run", "x.toml", "--max-step-seconds", bad])
