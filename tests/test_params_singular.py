@@ -94,7 +94,7 @@ def test_prewarping_moves_the_singular_point(tmp_path, capsys):
     # controller pole, which it is), no crash
     path = design_file(tmp_path, prewarp=46.70, c0_den="[[108.8], [-2400.0]]", name="b.toml")
     code, out, err = run(capsys, "params", "validate", path)
-    assert code == 1 and "controller itself is unstable" in out and err == ""
+    assert code == 1 and "controller itself is unstable (s = +2400 rad/s)" in out and err == ""
 
 
 def test_discretise_itself_refuses_the_singular_point():

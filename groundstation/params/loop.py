@@ -497,7 +497,8 @@ def _controller_pole_problems(design, cascades: dict[str, np.ndarray], report) -
                 else:
                     out.append(f"{design.mode}_{name} section {i}: pole at z = {complex(p):.6g} "
                                f"(|z| = {abs(p):.6f}) is not inside the unit circle: the "
-                               f"controller itself is unstable ({_continuous_pole_text(p)}) "
+                               f"controller itself is unstable "
+                               f"({_continuous_pole_text(p, prewarp_hz=design.prewarp_hz)}) "
                                f"and the device refuses such a table; move that pole of "
                                f"{name} into the left half-plane")
         marked = report.integrators.get(name, 0)
@@ -508,9 +509,20 @@ def _controller_pole_problems(design, cascades: dict[str, np.ndarray], report) -
     return out
 
 
-def _continuous_pole_text(p: complex, rate_hz: float = CONTROL_RATE_HZ) -> str:
-    s = np.log(complex(p)) * rate_hz
-    return f"s = {s.real:+.4g}{s.imag:+.4g}j rad/s"
+def _continuous_pole_text(p: complex, rate_hz: float = CONTROL_RATE_HZ,
+                          prewarp_hz: float | None = None) -> str:
+    """The design's own s for a discrete pole: the inverse of the (pre-warped) bilinear
+    map the discretisation used, s = 2 fs' (z - 1)/(z + 1), so it reads as the factor in
+    the design file."""
+    from .design import bilinear_rate_hz
+
+    z = complex(p)
+    if abs(z + 1) < 1e-12:
+        return "s = infinity"
+    s = 2 * bilinear_rate_hz(rate_hz, prewarp_hz) * (z - 1) / (z + 1)
+    if abs(s.imag) <= 1e-9 * abs(s):
+        return f"s = {s.real:+.6g} rad/s"
+    return f"s = {s.real:+.6g}{s.imag:+.6g}j rad/s"
 
 
 def _saturation_problems(values, tb, warnings: list[str]) -> list[str]:
