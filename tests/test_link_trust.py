@@ -153,3 +153,47 @@ def test_a_device_of_another_major_version_is_named_with_both_versions(tmp_path,
                 c.connect()
     finally:
         dev.stop()
+
+
+def test_one_wild_sequence_number_from_the_device_is_not_a_billion_drops(
+        client, device, dictionary, tmp_path, capsys):
+    """A frame with a wild sequence number that does come from the device (a firmware
+    bug, a corrupted header whose CRC still matched) is recorded as received, and both
+    the live statistics and `log info` count it as an outlier, not as 1.1e9 drops."""
+    from groundstation.cli import main
+
+    rec = Recorder(dictionary, tmp_path, flush_interval_s=0.05)
+    rec.start()
+    detach = attach_recorder(client, rec)
+    blocks = collect(client)
+    client.connect()
+    codec = FrameCodec(dictionary)
+    hr = dictionary.packet("HIGH_RATE").id
+    count = {"n": 0}
+
+    def one_wild(datagram):
+        if datagram[3] == hr:
+            count["n"] += 1
+            if count["n"] == 100:          # same payload and tick, a wild sequence number
+                tick = int.from_bytes(datagram[10:14], "big")
+                return codec.frame(hr, datagram[14:-4], 1_100_000_000, tick)
+        return datagram
+
+    device.datagram_filter = one_wild
+    device.run_ticks(300)
+    device.datagram_filter = None
+    wait_for(lambda: frames_of(blocks, "HIGH_RATE") == 300)
+    # the wild frame took the place of one real frame: that one is really missing
+    ps = client.stats.snapshot().packets["HIGH_RATE"]
+    assert (ps.dropped, ps.outliers) == (1, 1)
+    wait_for(lambda: rec.status().frames >= 300)
+    st = rec.stop()
+    detach()
+    capsys.readouterr()
+    assert main(["log", "info", str(st.path)]) == 0
+    out = capsys.readouterr().out
+    line = next(l for l in out.splitlines() if "HIGH_RATE" in l and "frames" in l)
+    assert "1099999" not in out and "1,099,999" not in out
+    with LogReader(st.path) as r:
+        summary = r.summary().packets["HIGH_RATE"]
+        assert (summary.drops, summary.gaps, summary.duplicates) == (1, 1, 1), line

@@ -28,10 +28,10 @@ from typing import Any, Iterable
 import h5py
 import numpy as np
 
+from ..codec.sequence import SequenceTracker
 from ..errors import GroundStationError
 from . import schema
 
-SEQ_MOD = 1 << 32
 HEADER_CHANNELS = ("sequence", "tick", "device_time", "host_time")
 TIMEBASES = ("device", "host")
 KINDS = ("header", "eng", "flag", "raw", "text")
@@ -202,7 +202,7 @@ class PacketSummary:
     last_host_time: float | None
     drops: int                # frames missing according to sequence gaps (mod 2^32)
     gaps: int                 # number of gaps
-    duplicates: int           # repeated or out-of-order sequence numbers
+    duplicates: int           # repeated, out-of-order or wild sequence numbers (not believed)
     rate_hz: float            # frames received per second of device time
 
     @property
@@ -814,25 +814,23 @@ class LogReader:
 
     # ------------------------------------------------------------------ gaps and summary
     def _scan_sequence(self, packet: str) -> tuple[np.ndarray, np.ndarray, int]:
-        """(row index after each gap, frames missing there, duplicates) for `packet`,
-        reading the sequence column in bounded pieces."""
-        ds = self._dataset(f"telemetry/{packet}/sequence")
+        """(row index after each gap, frames missing there, duplicates and outliers) for
+        `packet`, reading the sequence column in bounded pieces.  The rule is the live
+        link's (codec/sequence.py): one wild sequence number is an outlier, not a gap."""
         n = self.n_frames(packet)
-        idx, missing, dups = [], [], 0
-        prev = None
+        tracker = SequenceTracker()
+        idx, missing, odd = [], [], 0
         for a in range(0, n, _SCAN_ROWS):
-            seq = self._read(f"telemetry/{packet}/sequence", slice(a, min(n, a + _SCAN_ROWS))).astype(np.int64)
-            before = np.concatenate(([seq[0] - 1 if prev is None else prev], seq[:-1]))
-            step = (seq - before) % SEQ_MOD
-            lost = (step > 1) & (step < SEQ_MOD // 2)
-            where = np.flatnonzero(lost)
-            idx.append(where + a)
-            missing.append(step[where] - 1)
-            dups += int(np.count_nonzero((step == 0) | (step >= SEQ_MOD // 2)))
-            prev = int(seq[-1])
-        if not idx:
-            return np.zeros(0, np.int64), np.zeros(0, np.int64), 0
-        return np.concatenate(idx), np.concatenate(missing), dups
+            seq = self._read(f"telemetry/{packet}/sequence", slice(a, min(n, a + _SCAN_ROWS)))
+            rep = tracker.feed(seq)
+            idx.append(rep.gap_index)
+            missing.append(rep.missing)
+            odd += rep.duplicates + rep.outliers
+        end = tracker.finish()
+        idx.append(end.gap_index)
+        missing.append(end.missing)
+        odd += end.outliers
+        return np.concatenate(idx), np.concatenate(missing), odd
 
     @_guard
     def gaps(self, packet: str) -> dict[str, np.ndarray]:
