@@ -2,10 +2,11 @@
 
 from .export import export_csv, export_mat
 from .h5file import LogFile
-from .reader import LogError, LogFormatError, LogQueryError, LogReader
+from .check import check_log
+from .reader import LogDamagedError, LogError, LogFormatError, LogQueryError, LogReader
 from .recorder import Recorder, RecorderError, RecorderStatus, log_path
-from .replay import ReplayError, ReplaySource, iter_blocks
+from .replay import ReplayDamagedError, ReplayError, ReplaySource, iter_blocks
 
-__all__ = ["LogError", "LogFile", "LogFormatError", "LogQueryError", "LogReader", "Recorder",
-           "RecorderError", "RecorderStatus", "ReplayError", "ReplaySource", "export_csv",
-           "export_mat", "iter_blocks", "log_path"]
+__all__ = ["LogDamagedError", "LogError", "LogFile", "LogFormatError", "LogQueryError", "LogReader", "Recorder",
+           "RecorderError", "RecorderStatus", "ReplayDamagedError", "ReplayError", "ReplaySource", "export_csv",
+           "check_log", "export_mat", "iter_blocks", "log_path"]

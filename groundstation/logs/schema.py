@@ -22,8 +22,10 @@
         text (u1 stream of UTF-8 JSON), blob_offset/blob_length into blob (u1 stream)
 
 Everything is created before SWMR mode starts and only ever appended to, with fixed-size
-types (no variable-length HDF5 types: their heap is not SWMR-safe), so a reader - or
-h5dump - sees a consistent file while it grows and after a crash.  A log whose writer
+types (no variable-length HDF5 types: their heap is not SWMR-safe), so a reader in
+SWMR mode (ours, h5py with swmr=True) sees a consistent file while it grows and after a
+crash.  HDF5's own tools (h5dump, h5ls), MATLAB and HDFView refuse a file while it is
+open for SWMR writing and open it once the recording has stopped.  A log whose writer
 was killed keeps HDF5's "open for writing" mark: our reader (SWMR read mode) opens it
 as it is; other tools want `h5clear -s FILE` first.
 """
