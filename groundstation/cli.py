@@ -246,6 +246,10 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:            # output piped into `head` and the like
         sys.stderr.close()
         return 0
+    except KeyboardInterrupt:          # a command without its own Ctrl-C handling: its
+        # `finally` blocks have run (links closed: the device disarms, generator off)
+        print("interrupted by the operator (Ctrl-C)", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

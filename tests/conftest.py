@@ -25,6 +25,17 @@ def wait_for(predicate, timeout: float = 5.0, interval: float = 0.005):
     raise AssertionError(f"condition not met within {timeout} s")
 
 
+def collect(client):
+    """Every telemetry block the client hands on, in a list (the test reads it)."""
+    blocks = []
+    client.subscribe(blocks.append)
+    return blocks
+
+
+def frames_of(blocks, name):
+    return sum(len(b) for b in blocks if b.name == name)
+
+
 @pytest.fixture(autouse=True)
 def _private_data_home(tmp_path_factory, monkeypatch):
     """Parameter history and other per-user files go to a temporary folder, never to the

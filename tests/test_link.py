@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import wait_for
+from conftest import collect, frames_of, wait_for
 from groundstation.codec import FrameCodec, StreamDeframer
 from groundstation.dictionary import load_dictionary
 from groundstation.errors import (CommandArgumentError, CommandRejected, CommandTimeout,
@@ -21,16 +21,6 @@ from groundstation.errors import (CommandArgumentError, CommandRejected, Command
 from groundstation.link import DeviceClient, open_client, parse_address
 from groundstation.link.transports import TcpStream, UdpReceiver
 from groundstation.sim import SimulatedDevice
-
-
-def collect(client):
-    blocks = []
-    client.subscribe(blocks.append)
-    return blocks
-
-
-def frames_of(blocks, name):
-    return sum(len(b) for b in blocks if b.name == name)
 
 
 # ------------------------------------------------------------------ session

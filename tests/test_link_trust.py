@@ -23,17 +23,7 @@ from groundstation.logs import LogReader, Recorder
 from groundstation.logs.live import attach_recorder
 from groundstation.sim import SimulatedDevice
 
-from conftest import wait_for
-
-
-def collect(client):
-    blocks = []
-    client.subscribe(blocks.append)
-    return blocks
-
-
-def frames_of(blocks, name):
-    return sum(len(b) for b in blocks if b.name == name)
+from conftest import collect, frames_of, wait_for
 
 
 def high_rate_frame(dictionary, sequence: int, tick: int) -> bytes:
