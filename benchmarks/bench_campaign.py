@@ -25,7 +25,7 @@ from groundstation import Testbed
 from groundstation.dictionary import load_dictionary
 from groundstation.sim.device import SimulatedDevice
 from groundstation.sim.firmware import Firmware
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 PROFILE = ROOT / "profiles" / "waveforms" / "sysid_coarse_noise_0p02A.toml"

@@ -57,7 +57,7 @@ from groundstation.gui.main_window import MainWindow
 from groundstation.gui.session import Session
 from groundstation.logs.live import attach_recorder
 from groundstation.sim.process import SimulatorProcess
-from groundstation.sim.testbed import TESTBEDS_DIR
+from groundstation.plant.testbed import TESTBEDS_DIR
 
 HERE = Path(__file__).resolve().parent
 TESTBED = TESTBEDS_DIR / "inertial_2dof.toml"

@@ -30,7 +30,7 @@ from groundstation.dictionary import load_dictionary
 from groundstation.logs import Recorder
 from groundstation.logs.reader import LogReader
 from groundstation.sim import SimulatedDevice
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 RATE = 1200.0
 LAYOUTS = {

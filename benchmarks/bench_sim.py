@@ -41,7 +41,7 @@ from groundstation.params import table as ptable
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import COMPLETED, Firmware
 from groundstation.sim.process import SimulatorProcess
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 RATE = 1200.0
 

@@ -269,7 +269,7 @@ def check_campaign(campaign: Campaign, dictionary=None) -> list[str]:
     every referenced design, profile and PSD file must load.  Returns the problems,
     each naming file, step and field; nothing is sent anywhere."""
     from .dictionary import load_dictionary
-    from .sim.testbed import load_testbed
+    from .plant.testbed import load_testbed
 
     d = dictionary if dictionary is not None else load_dictionary()
     problems: list[str] = []

@@ -47,7 +47,7 @@ def _cmd_protocol(args) -> int:
 
 def _cmd_sim(args) -> int:
     from .sim import SimulatedDevice
-    from .sim.testbed import load_testbed
+    from .plant.testbed import load_testbed
 
     stop = threading.Event()
     # Ctrl-C and SIGTERM both ask for a clean stop, whenever they come (even during start)
@@ -103,7 +103,7 @@ def _cmd_monitor(args) -> int:
     """Exit status as for `record`: 0 ended as asked, 1 link lost with --no-reconnect,
     2 could not connect, 3 the session was taken over by another station."""
     from .link import format_snapshot
-    from .link.keeper import LinkKeeper
+    from .station.keeper import LinkKeeper
     from .stop_request import StopRequest
 
     d = load_dictionary(args.protocol_dir)

@@ -21,10 +21,10 @@ link is reopened with back-off (1, 2, 4, 8, then every 10 s); the log records th
 
 def _cmd_record(args) -> int:
     from .link import format_snapshot
-    from .link.keeper import LinkKeeper
+    from .station.keeper import LinkKeeper
     from .logs import Recorder
     from .logs.live import attach_recorder
-    from .sim.testbed import load_testbed
+    from .plant.testbed import load_testbed
     from .stop_request import StopRequest
 
     d = load_dictionary(args.protocol_dir)

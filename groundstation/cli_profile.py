@@ -76,7 +76,7 @@ def _gyro_range(args) -> float:
     from .profiles.profile import DEFAULT_GYRO_RANGE
     if not args.testbed:
         return DEFAULT_GYRO_RANGE
-    from .sim.testbed import load_testbed
+    from .plant.testbed import load_testbed
     return float(load_testbed(args.testbed).sensors["gyro_range"])
 
 

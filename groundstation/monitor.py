@@ -17,7 +17,6 @@ from .codec import TelemetryBlock
 from .dictionary import Dictionary
 
 GREEN, YELLOW, RED = 0, 1, 2
-STATE_NAMES = ("green", "yellow", "red")
 
 
 @dataclass

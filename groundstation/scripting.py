@@ -36,7 +36,7 @@ from .link import open_client
 from .logs import Recorder
 from .logs.live import attach_recorder
 from .params.upload import ParameterHistory, ParameterLoader
-from .sim.testbed import load_testbed
+from .plant.testbed import load_testbed
 
 log = logging.getLogger(__name__)
 

@@ -22,3 +22,88 @@ def test_no_qt_outside_the_gui_package():
             offenders += [f"{path.name}: {n}" for n in names
                           if n.split(".")[0] in ("PySide6", "pyqtgraph", "shiboken6")]
     assert not offenders, offenders
+
+
+def _package_of(path: Path) -> str:
+    """The unit a module belongs to: its top-level package under groundstation/, or the
+    module itself for a top-level module (cli.py -> 'cli')."""
+    return path.relative_to(PKG).parts[0].removesuffix(".py")
+
+
+def _imported_units(path: Path) -> set[str]:
+    """Top-level units of groundstation that `path` imports (relative or absolute)."""
+    parts = path.relative_to(PKG).with_suffix("").parts
+    folder = list(parts[:-1])                    # the package the module sits in
+    units: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.ImportFrom) and node.level:
+            base = folder[:len(folder) - (node.level - 1)] if node.level > 1 else folder
+            target = base + (node.module.split(".") if node.module else [])
+            if target:
+                units.add(target[0])
+            else:                                # `from .. import cli_logs`
+                units.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("groundstation."):
+            units.add(node.module.split(".")[1])
+        elif isinstance(node, ast.Import):
+            units.update(a.name.split(".")[1] for a in node.names
+                         if a.name.startswith("groundstation."))
+    return units
+
+
+def package_imports() -> dict[str, set[str]]:
+    graph: dict[str, set[str]] = {}
+    for path in PKG.rglob("*.py"):
+        unit = _package_of(path)
+        graph.setdefault(unit, set()).update(u for u in _imported_units(path) if u != unit)
+    return graph
+
+
+def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components with more than one unit (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph.get(v, ()):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_the_cycle_finder_finds_a_cycle():
+    assert import_cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert import_cycles({"a": {"b"}, "b": set()}) == []
+
+
+def test_no_import_cycles_between_packages():
+    """Data flows one way: no package (or top-level module) imports, directly or through
+    others, one that imports it back.  The testbed model (plant/) is read by the
+    simulator and the controller design and reads neither."""
+    graph = package_imports()
+    assert "plant" in graph["params"] and "plant" in graph["sim"]      # the scan sees imports
+    assert import_cycles(graph) == []
+    assert not graph.get("plant", set()) & {"sim", "params", "link", "gui", "logs"}

@@ -22,7 +22,7 @@ from groundstation.logs import Recorder
 from groundstation.logs.live import attach_recorder
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.scpi_fg import attach_generator
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 BM_DIR = ROOT / "profiles" / "base_motion"

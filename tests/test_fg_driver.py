@@ -22,7 +22,7 @@ from groundstation.instruments import (InstrumentError, InstrumentLimitError, In
                                        open_generator)
 from groundstation.instruments import spec4050 as spec
 from groundstation.sim.scpi_fg import ScpiServer, SimulatedGenerator
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 YAML = str(Path(__file__).resolve().parent / "fg_sim.yaml")

@@ -25,7 +25,7 @@ from groundstation.errors import GroundStationError
 from groundstation.instruments import (InstrumentError, InstrumentLimitError,
                                        InstrumentLinkError, SafetyLimitError, open_generator)
 from groundstation.sim.scpi_fg import ScpiServer, SimulatedGenerator
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 YAML = Path(__file__).resolve().parent / "fg_sim.yaml"

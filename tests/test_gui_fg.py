@@ -25,7 +25,7 @@ from groundstation.gui.fg_panel import FIELD_BAD
 from groundstation.gui.main_window import MainWindow
 from groundstation.gui.session import Session
 from groundstation.logs import LogReader
-from groundstation.sim.testbed import load_testbed
+from groundstation.plant.testbed import load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 INERTIAL = "profiles/testbeds/inertial_2dof.toml"

@@ -12,7 +12,7 @@ from groundstation.params.design import load_design, table_values
 from groundstation.params.upload import ParameterHistory
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import Firmware
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 CONTROLLERS = Path(__file__).resolve().parent.parent / "profiles" / "controllers"
 

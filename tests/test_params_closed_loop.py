@@ -18,7 +18,7 @@ from groundstation.params.loop import validate
 from groundstation.params.upload import ParameterLoader
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import Firmware
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 from groundstation.stream import TelemetryStore
 
 CONTROLLERS = Path(__file__).resolve().parent.parent / "profiles" / "controllers"

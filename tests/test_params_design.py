@@ -18,7 +18,7 @@ from groundstation.params.design import (CONTROL_RATE_HZ, DesignError, TransferF
                                          section_responses, sos_response,
                                          table_values)
 from groundstation.params.loop import bode, loop_model, validate
-from groundstation.sim.model import plant_transfer_functions
+from groundstation.plant.model import plant_transfer_functions
 
 ROOT = Path(__file__).resolve().parent.parent
 CONTROLLERS = ROOT / "profiles" / "controllers"
@@ -254,7 +254,7 @@ def test_the_loop_model_reproduces_the_simulated_testbed(designs, dictionary, tm
     the closed-loop state matrix that validation uses: same to the sensors' quantisation."""
     from groundstation.sim import core
     from groundstation.sim.engine import Engine
-    from groundstation.sim.testbed import load_testbed
+    from groundstation.plant.testbed import load_testbed
 
     d = designs[name]
     text = d.testbed.path.read_text()

@@ -16,7 +16,7 @@ from groundstation.params.design import (DesignError, TransferFunction, bilinear
 from groundstation.params.upload import ParameterHistory
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import Firmware
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 CONTROLLERS = ROOT / "profiles" / "controllers"

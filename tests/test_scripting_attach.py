@@ -14,7 +14,7 @@ from groundstation.logs import LogReader
 from groundstation.scripting import ScriptError, Testbed
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.scpi_fg import attach_generator
-from groundstation.sim.testbed import load_testbed
+from groundstation.plant.testbed import load_testbed
 
 from conftest import wait_for
 

@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 
 from groundstation.sim.firmware import Firmware
-from groundstation.sim.model import discrete_model
-from groundstation.sim.testbed import TESTBEDS_DIR, TestbedConfigError, load_testbed
+from groundstation.plant.model import discrete_model
+from groundstation.plant.testbed import TESTBEDS_DIR, TestbedConfigError, load_testbed
 from test_sim_reference import firmware, keep_alive, pid_sos, variant
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -22,9 +22,9 @@ from groundstation.codec.frames import encode_items
 from groundstation.params import table as ptable
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import COMPLETED, Firmware
-from groundstation.sim.friction import load_slope_table
-from groundstation.sim.model import plant_transfer_functions
-from groundstation.sim.testbed import TESTBEDS_DIR, load_testbed
+from groundstation.plant.slope_table import load_slope_table
+from groundstation.plant.model import plant_transfer_functions
+from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 RATE = 1200.0
 

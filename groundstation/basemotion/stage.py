@@ -8,7 +8,7 @@ spring make a lightly damped second-order system, so
     theta_b(s) / v_fg(s) = K * wn^2 / (s^2 + 2 zeta wn s + wn^2),
     K = amplifier_gain * actuator_gain  (rad/V, the DC gain), wn = 2 pi natural_frequency
 
-- the same model the simulator integrates (`groundstation/sim/model.py`).  The generator
+- the same model the simulator integrates (`groundstation/plant/model.py`).  The generator
 plays an arbitrary waveform as a staircase (each sample held for one sample interval), so
 the exact response at the sample instants is that of the zero-order-hold discretisation;
 `held_response` gives it, and pre-compensation divides by it.

@@ -27,7 +27,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDoubleSpinBox, QFi
 
 from ..campaign import Campaign, StepResult, load_campaign
 from ..errors import GroundStationError
-from ..sim.testbed import PROFILES_DIR
+from ..plant.testbed import PROFILES_DIR
 from .campaign_runner import CampaignOutcome
 from .file_combo import select_file
 from .session import Session

@@ -37,7 +37,7 @@ from PySide6.QtCore import QObject, Signal
 from ..campaign import Campaign, CampaignReport, CampaignRunner, Step, StepResult
 from ..errors import GroundStationError
 from ..scripting import Testbed
-from ..sim.testbed import DEFAULT_TESTBED, load_testbed
+from ..plant.testbed import DEFAULT_TESTBED, load_testbed
 
 log = logging.getLogger(__name__)
 

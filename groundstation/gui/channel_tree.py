@@ -177,9 +177,6 @@ class ChannelTree(QWidget):
         """The channel ids the current search leaves visible."""
         return [cid for cid, row in self._items.items() if not row.isHidden()]
 
-    def selected_ids(self) -> list[str]:
-        return [i.data(0, ID_ROLE) for i in self.tree.selectedItems() if i.data(0, ID_ROLE)]
-
     def item_for(self, channel_id: str) -> QTreeWidgetItem:
         return self._items[channel_id]
 

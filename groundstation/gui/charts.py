@@ -415,15 +415,6 @@ class StripChartPanel(QWidget):
                 out[name] = float(dev[-1])
         return out
 
-    def set_store(self, store: TelemetryStore) -> None:
-        """Switch the data source (live ↔ replay); plots whose channels the new store
-        lacks keep them and stay empty."""
-        self.store = store
-        if self._paused:
-            self._frozen_end = self._newest_times()
-        self._series = {}
-        self._need_fetch = self._render_pending = self._snap_x = True
-
     def set_autoscale(self, plot_index: int, enabled: bool = True) -> None:
         self.plots[plot_index].set_autoscale(enabled)
 

@@ -29,7 +29,7 @@ from PySide6.QtCore import QObject, Signal
 
 from ..params import table as ptable
 from ..profiles.profile import WAVEFORMS_DIR
-from ..sim.testbed import DEFAULT_TESTBED, PROFILES_DIR
+from ..plant.testbed import DEFAULT_TESTBED, PROFILES_DIR
 from .charts import StripChartPanel
 from .params_panel import ParameterPanel
 from .profile_panel import ProfilePanel

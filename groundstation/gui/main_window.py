@@ -10,7 +10,7 @@ from PySide6.QtGui import QAction, QKeySequence, QShortcut
 from PySide6.QtWidgets import (QDockWidget, QFileDialog, QLabel, QMainWindow, QMessageBox,
                                QPushButton, QToolBar)
 
-from ..sim.testbed import TESTBEDS_DIR
+from ..plant.testbed import TESTBEDS_DIR
 from .campaign_panel import CampaignPanel
 from .channel_tree import ChannelTree
 from .charts import StripChartPanel

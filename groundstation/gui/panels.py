@@ -95,7 +95,7 @@ class ConnectionBar(QWidget):
     def _show_testbed(self, path: str | None) -> None:
         """Select the testbed the simulator runs (a script or the CLI may have chosen it),
         so the bar never names another one."""
-        from ..sim.testbed import DEFAULT_TESTBED
+        from ..plant.testbed import DEFAULT_TESTBED
         name = Path(path).name if path else DEFAULT_TESTBED.name
         for i in range(self.testbed.count()):
             if Path(self.testbed.itemText(i)).name == name:

@@ -518,11 +518,3 @@ class Session(QObject):
             self.sig_source.emit("none", "")
 
     # ------------------------------------------------------------------ helpers
-    def wait_connected(self, timeout: float = 30.0) -> bool:
-        """For scripts and tests: block until the live link is up (or timeout)."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if self.client is not None and self.client.link_state == "up":
-                return True
-            time.sleep(0.02)
-        return False

@@ -157,10 +157,6 @@ class SpectrumView(QWidget):
             raise ValueError(f"spectrum length {seconds!r} s not one of {SECONDS_CHOICES}")
         self.seconds_combo.setCurrentIndex(i)
 
-    def set_store(self, store: TelemetryStore) -> None:
-        self.store = store
-        self.refresh()
-
     def _on_channel(self) -> None:
         info = self.catalog.get(self.channel)
         unit = display_unit(info.units if info else "")

@@ -54,12 +54,6 @@ class CommandResult:
     def final_stage(self) -> str:
         return self.stages[-1].stage if self.stages else "UNSENT"
 
-    @property
-    def round_trip_s(self) -> float | None:
-        done = [s for s in self.stages if s.stage in ("COMPLETED", "FAILED", "REJECTED")]
-        return done[-1].host_time - self.stages[0].host_time if done else None
-
-
 class _Pending:
     def __init__(self, result: CommandResult):
         self.result = result

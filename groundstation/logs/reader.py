@@ -34,7 +34,6 @@ from . import schema
 
 HEADER_CHANNELS = ("sequence", "tick", "device_time", "host_time")
 TIMEBASES = ("device", "host")
-KINDS = ("header", "eng", "flag", "raw", "text")
 _SCAN_ROWS = 1 << 20            # rows per read when a whole column must be scanned
 
 

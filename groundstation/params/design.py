@@ -193,7 +193,7 @@ class ControllerDesign:
     name: str
     description: str
     mode: str                       # "relative" | "inertial"
-    testbed: Any                    # groundstation.sim.testbed.Testbed
+    testbed: Any                    # groundstation.plant.testbed.Testbed
     c0: TransferFunction            # in-oz/rad (relative) or in-oz/(rad/s) (inertial)
     c1: TransferFunction            # coarse path c1' (dimensionless)
     c2: TransferFunction            # fine path c2'
@@ -365,7 +365,7 @@ def _partner(partner_path: Path, path: Path, chain: tuple[Path, ...], mode: str)
 
 
 def _testbed(d: dict, where: str):
-    from ..sim.testbed import load_testbed
+    from ..plant.testbed import load_testbed
 
     if "testbed" not in d:
         raise DesignError(f"{where}: design.testbed is missing; give the testbed file the design "
@@ -398,7 +398,7 @@ def _friction(doc: dict, where: str) -> FrictionCompensation:
     table = f.get("slope_table")
     xs = ys = None
     if table is not None:
-        from ..sim.friction import load_slope_table
+        from ..plant.slope_table import load_slope_table
 
         try:
             x, y = load_slope_table(table)
@@ -493,7 +493,7 @@ def output_equivalent_c0(partner: ControllerDesign, c1: TransferFunction, c2: Tr
     gyro model, which cancel in the ratio.  Returns the new c0 and the number of pole/zero
     pairs cancelled.  The polynomials here are of low degree (<= 8); the roots are checked
     by comparing the two loop gains along the frequency axis."""
-    from ..sim.model import plant_transfer_functions
+    from ..plant.model import plant_transfer_functions
 
     if not testbed.is_2dof:
         raise DesignError(f"{where}: c0.equivalent_to needs a 2-DOF testbed (two inputs g1, g2); "

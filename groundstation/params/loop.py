@@ -9,7 +9,7 @@ the design's testbed and the device's loop structure (protocol/SPEC.md §10.1):
   dynamics and a pure delay) and theta_hat the device's complementary filter of the
   integrated gyro and the autocollimator.
 
-The plant is the testbed's linear model (sim/model.py, bearing friction linearised to
+The plant is the testbed's linear model (plant/model.py, bearing friction linearised to
 its viscous part b_f, base at rest) discretised exactly for a zero-order hold at the
 control rate: the sensors are sampled at the start of a period and the torques computed
 from them are held over that period, as the simulator and the rig do.  The gyro delay
@@ -33,7 +33,7 @@ import numpy as np
 from scipy.optimize import brentq
 
 from ..dictionary import Dictionary, load_dictionary
-from ..sim import model as plant_model
+from ..plant import model as plant_model
 from . import table as ptable
 from .design import (CONTROL_RATE_HZ, MATCH_BAND_HZ, ControllerDesign, DiscretisationMatch,
                      discretisation_match, match_frequencies, response_error, sos_response,
@@ -354,12 +354,6 @@ def loop_model(design: ControllerDesign, values: Mapping[str, Any] | None = None
                         crossover_hz=float(np.float32(values["complementary_crossover"])))
     c0, c1, c2 = (np.asarray(values[f"{design.mode}_{k}"], dtype=float) for k in ("c0", "c1", "c2"))
     return LoopModel(design, loop, c0, c1, c2)
-
-
-def loop_response(design: ControllerDesign, freqs_hz: np.ndarray,
-                  values: Mapping[str, Any] | None = None, loop: str = "error") -> np.ndarray:
-    """Loop gain L(e^(j 2 pi f T)) for a Bode plot (see LoopModel.response for `loop`)."""
-    return loop_model(design, values).response(freqs_hz, loop)
 
 
 @dataclass(frozen=True, eq=False)

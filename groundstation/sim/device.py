@@ -22,7 +22,7 @@ from ..dictionary import Dictionary, load_dictionary
 from ..errors import LinkLostError, PortInUseError
 from ..link.transports import StreamTransport, TcpStream, listening_socket
 from .firmware import REJECTED, Firmware
-from .testbed import Testbed
+from ..plant.testbed import Testbed
 
 log = logging.getLogger(__name__)
 

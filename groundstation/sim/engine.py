@@ -13,8 +13,8 @@ import numpy as np
 
 from . import core
 from . import friction as fr
-from .model import discrete_model
-from .testbed import Testbed
+from ..plant.model import discrete_model
+from ..plant.testbed import Testbed
 
 SOS_SECTIONS_DEFAULT = 12
 CONTROLLER_KEYS = ("relative_c0", "relative_c1", "relative_c2",

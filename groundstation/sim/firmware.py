@@ -25,7 +25,7 @@ from ..params import table as ptable
 from . import core
 from . import friction as fr
 from .engine import Engine
-from .testbed import Testbed, load_testbed
+from ..plant.testbed import Testbed, load_testbed
 
 log = logging.getLogger(__name__)
 

@@ -14,7 +14,7 @@ from typing import Callable
 
 from ..dictionary import Dictionary
 from ..errors import GroundStationError
-from .client import DeviceClient
+from ..link.client import DeviceClient
 
 log = logging.getLogger(__name__)
 
@@ -49,7 +49,7 @@ class LinkKeeper:
         """Start the simulator if asked for, open the link and connect; raises
         GroundStationError (with the device's reason) if that fails."""
         from ..sim.process import SimulatorProcess
-        from .address import open_client
+        from ..link.address import open_client
 
         if self.device == "sim":
             if self.sim is None or self.sim.proc is None or self.sim.proc.poll() is not None:
