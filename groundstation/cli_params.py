@@ -20,7 +20,6 @@ import argparse
 import sys
 
 from .errors import GroundStationError
-from .params.loop import report_lines
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
 
@@ -48,7 +47,7 @@ def _add_validate(actions) -> None:
 def _cmd_validate(args) -> int:
     from .dictionary import load_dictionary
     from .params.design import load_design, table_values
-    from .params.loop import validate
+    from .params.loop import report_lines, validate
 
     try:
         design = load_design(args.file)
@@ -161,7 +160,7 @@ def _fail(text: str, code: int = EXIT_REFUSED) -> int:
 
 def _cmd_upload(args) -> int:
     from .params.design import load_design, table_values
-    from .params.loop import validate
+    from .params.loop import report_lines, validate
 
     try:
         design = load_design(args.file)

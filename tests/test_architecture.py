@@ -107,3 +107,19 @@ def test_no_import_cycles_between_packages():
     assert "plant" in graph["params"] and "plant" in graph["sim"]      # the scan sees imports
     assert import_cycles(graph) == []
     assert not graph.get("plant", set()) & {"sim", "params", "link", "gui", "logs"}
+
+
+def test_the_command_line_starts_without_the_heavy_libraries():
+    """`groundstation --help` and every command's argument parsing import only the
+    standard library and numpy: scipy, h5py, Qt, pyvisa, numba and pyserial are imported
+    by the commands that use them (start-up time is measured in the README)."""
+    import subprocess
+    import sys
+
+    heavy = ["scipy", "h5py", "PySide6", "pyqtgraph", "pyvisa", "pyvisa_sim", "numba",
+             "matplotlib", "serial", "zmq", "dask"]
+    code = ("import sys, groundstation.cli as c; c.build_parser(); "
+            f"print(sorted({{m.split('.')[0] for m in sys.modules}} & set({heavy!r})))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "[]", f"imported at start-up: {out}"
