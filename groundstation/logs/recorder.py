@@ -31,6 +31,7 @@ import numpy as np
 from ..codec import TelemetryBlock
 from ..dictionary import Dictionary
 from ..errors import GroundStationError
+from .messages import Closed, Failed, Flushed, Frames, JournalEntry, Started, StartFailed, Stop, Stopped
 from .schema import JOURNAL_KINDS
 from .writer import writer_main
 
@@ -172,10 +173,10 @@ class Recorder:
             if time.monotonic() > deadline:
                 self._kill()
                 raise RecorderError(f"the log writer did not start within {timeout} s") from None
-        if msg[0] != "started":
+        if not isinstance(msg, Started):
             self._kill()
-            raise RecorderError(msg[1])
-        self.path = Path(msg[1])
+            raise RecorderError(msg.message if isinstance(msg, StartFailed) else repr(msg))
+        self.path = Path(msg.path)
         self.files.append(self.path)
         self.state = "recording"
         self._stopped.clear()
@@ -207,7 +208,7 @@ class Recorder:
             data = list(block.frames)
         host = np.ascontiguousarray(np.broadcast_to(block.host_time, (len(block),)), dtype=np.float64)
         try:
-            self._inbox.put_nowait(("frames", block.packet.id, data, host))
+            self._inbox.put_nowait(Frames(block.packet.id, data, host))
         except queue.Full:
             self.discarded_blocks += 1
 
@@ -219,8 +220,8 @@ class Recorder:
         if self.state != "recording":
             return
         try:
-            self._inbox.put_nowait(("journal", at if at is not None else time.time(), kind,
-                                    record, bytes(blob)))
+            self._inbox.put_nowait(JournalEntry(at if at is not None else time.time(), kind,
+                                                record, bytes(blob)))
         except queue.Full:
             self.discarded_blocks += 1
 
@@ -235,7 +236,7 @@ class Recorder:
         if self.state == "recording":
             self.stop_reason = reason
             try:
-                self._inbox.put(("stop", reason), timeout=timeout)
+                self._inbox.put(Stop(reason), timeout=timeout)
             except queue.Full:
                 pass
             self._stopped.wait(timeout)
@@ -283,24 +284,23 @@ class Recorder:
                 continue
             except (EOFError, OSError):
                 return
-            kind = msg[0]
-            if kind == "flushed":
-                self._frames, self._bytes, self.last_flushed_host_time = msg[1], msg[2], msg[3]
+            if isinstance(msg, Flushed):
+                self._frames, self._bytes, self.last_flushed_host_time = msg.frames, msg.size_bytes, msg.last_host_time
                 if self.on_flush is not None:
                     self.on_flush(self.status(), self.last_flushed_host_time)
-            elif kind == "closed":
-                self._frames_closed += msg[1]
+            elif isinstance(msg, Closed):
+                self._frames_closed += msg.frames
                 self._frames = 0
-            elif kind == "started":
-                self.path = Path(msg[1])
+            elif isinstance(msg, Started):
+                self.path = Path(msg.path)
                 self.files.append(self.path)
-            elif kind == "stopped":
-                self._frames = msg[1]
+            elif isinstance(msg, Stopped):
+                self._frames = msg.frames
                 self.state = "stopped"
                 self._stopped.set()
                 return
-            elif kind == "failed":
-                self._failed(msg[1], msg[2])
+            elif isinstance(msg, Failed):
+                self._failed(msg.message, msg.last_host_time)
                 return
 
     def _failed(self, why: str, last: float | None) -> None:

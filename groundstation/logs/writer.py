@@ -26,6 +26,8 @@ import numpy as np
 from ..codec import FrameCodec
 from ..dictionary import load_dictionary
 from .h5file import LogFile
+from .messages import (Closed, Failed, Flushed, Frames, JournalEntry, Started, StartFailed, Stop,
+                       Stopped)
 
 
 def ignore_terminal_interrupt() -> None:
@@ -67,9 +69,9 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
     try:
         lf = open_file(path, run)
     except Exception as exc:
-        outbox.put(("start_failed", f"cannot create log file: {_explain(exc, path)}"))
+        outbox.put(StartFailed(f"cannot create log file: {_explain(exc, path)}"))
         return
-    outbox.put(("started", str(path)))
+    outbox.put(Started(str(path)))
     blocks: list = []
     journal: list = []
     interval = config["flush_interval_s"]
@@ -80,20 +82,19 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
         try:
             msg = inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
             while True:
-                kind = msg[0]
-                if kind == "frames":
-                    _, pid, data, host = msg
-                    pkt = codec.packet(pid)
+                if isinstance(msg, Frames):
+                    pkt = codec.packet(msg.packet_id)
+                    data, host = msg.data, msg.host_time
                     if pkt.variable_item is None:
                         arr = np.frombuffer(data, np.uint8).reshape(len(host), -1)
                         blocks.append(codec.decode_fixed(pkt, arr, host))
                     else:
                         blocks.append(codec.decode_variable(pkt, data, host))
-                elif kind == "journal":
-                    journal.append(msg[1:])
-                elif kind == "stop":
+                elif isinstance(msg, JournalEntry):
+                    journal.append((msg.at, msg.kind, msg.record, msg.blob))
+                elif isinstance(msg, Stop):
                     stopping = True
-                    stop_reason = msg[1] if len(msg) > 1 else ""
+                    stop_reason = msg.reason
                     break
                 msg = inbox.get_nowait()
         except queue.Empty:
@@ -117,7 +118,7 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
                 lf.close(clean=True)
             except Exception:   # the margin was not enough after all; the flushed part stands
                 pass
-            outbox.put(("failed", short, lf.last_host_time, lf.frames_written))
+            outbox.put(Failed(short, lf.last_host_time, lf.frames_written))
             return
         try:
             lf.append(blocks)
@@ -129,22 +130,22 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
             lf.journal(journal)
             lf.flush()
             blocks, journal = [], []
-            outbox.put(("flushed", lf.frames_written, lf.size_bytes, lf.last_host_time, str(lf.path)))
+            outbox.put(Flushed(lf.frames_written, lf.size_bytes, lf.last_host_time, str(lf.path)))
             if stopping:
                 lf.close(clean=True)
-                outbox.put(("stopped", lf.frames_written, str(lf.path)))
+                outbox.put(Stopped(lf.frames_written, str(lf.path)))
                 return
             if _rollover_due(lf, config):
                 lf.journal([(time.time(), "recorder", {"action": "rollover"}, b"")])
                 lf.close(clean=True)
-                outbox.put(("closed", lf.frames_written, str(lf.path)))
+                outbox.put(Closed(lf.frames_written, str(lf.path)))
                 run += 1
                 path = _next_path(config, run)
                 lf = open_file(path, run)
-                outbox.put(("started", str(path)))
+                outbox.put(Started(str(path)))
         except Exception as exc:
             last = lf.last_host_time
-            outbox.put(("failed", _explain(exc, lf.path), last, lf.frames_written))
+            outbox.put(Failed(_explain(exc, lf.path), last, lf.frames_written))
             outbox.close()
             outbox.join_thread()
             # no close, no cleanup: after a failed write HDF5 may crash while closing; the
