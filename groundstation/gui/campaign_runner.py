@@ -34,15 +34,16 @@ from pathlib import Path
 
 from PySide6.QtCore import QObject, Signal
 
-from ..campaign import Campaign, CampaignReport, CampaignRunner, Step, StepResult
+from ..campaign import ACTIONS, Campaign, CampaignReport, CampaignRunner, Step, StepResult
+from ..clock import ScriptAborted
 from ..errors import GroundStationError
 from ..scripting import Testbed
 from ..plant.testbed import DEFAULT_TESTBED, load_testbed
 
 log = logging.getLogger(__name__)
 
-#: actions that need a function generator in the session
-GENERATOR_ACTIONS = {"generator_set", "generator_off", "play_base_motion"}
+#: actions that need a function generator in the session (each action says so itself)
+GENERATOR_ACTIONS = frozenset(name for name, action in ACTIONS.items() if action.needs_generator)
 #: how long shutdown waits for a running campaign to make the rig safe and stop
 STOP_TIMEOUT_S = 20.0
 
@@ -76,7 +77,7 @@ class _SignallingRunner(CampaignRunner):
         try:
             super()._do(step)
         except BaseException as exc:
-            aborted = c.abort_requested or type(exc).__name__ == "ScriptAborted"
+            aborted = c.abort_requested or isinstance(exc, ScriptAborted)
             c.sig_step_result.emit(StepResult(step.index, step.label(),
                                               "aborted" if aborted else "failed",
                                               time.monotonic() - t0, str(exc).strip()

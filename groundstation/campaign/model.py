@@ -1,0 +1,52 @@
+"""The campaign as typed records: the campaign itself, its steps, and the error that
+lists what is wrong with a campaign file.  No I/O and no knowledge of the actions."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ..errors import GroundStationError
+
+
+class CampaignError(GroundStationError):
+    """A campaign file is malformed or asks for values the rig must not be given; every
+    problem found names the file, the step and the field (`problems`, one per line of
+    the message)."""
+
+    def __init__(self, message: str, problems: list[str] | None = None):
+        super().__init__(message)
+        self.problems = list(problems) if problems else [message]
+
+
+@dataclass
+class Step:
+    index: int                       # position in the whole campaign, 0-based
+    phase: str                       # "setup", "run", "teardown"
+    run: int                         # 1-based run number (0 in setup/teardown)
+    action: str
+    args: dict[str, Any]
+    variables: dict[str, Any]
+    position: int = 0                # 1-based position within its phase (within a run)
+
+    def label(self) -> str:
+        where = f"run {self.run}" if self.run else self.phase
+        return f"step {self.index + 1} ({where}): {self.action}"
+
+    def where(self) -> str:
+        """'run 2 step 4 (dwell)', 'setup step 1 (connect)': how problems name a step."""
+        head = f"run {self.run}" if self.run else self.phase
+        return f"{head} step {self.position} ({self.action})"
+
+
+@dataclass
+class Campaign:
+    path: Path
+    name: str
+    description: str
+    testbed: Path
+    matrix: dict[str, list[Any]]
+    steps: list[Step]
+    runs: int
+    on_run_failure: str = "stop"

@@ -1,0 +1,137 @@
+"""Running a checked campaign on an open Testbed, step by step: each step is done by its
+action's handler (`actions.ACTIONS`); a failure, an abort or Ctrl-C ends the campaign
+with the rig made safe, or - with on_run_failure = "next_run" - ends only that run."""
+
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+import time
+import traceback
+from typing import Any, Callable
+
+from ..clock import ScriptAborted
+from ..errors import GroundStationError
+from .actions import ACTIONS, StepRun, known_actions
+from .model import Campaign, Step
+from .report import CampaignReport, StepResult
+
+
+class CampaignRunner:
+    """Runs a Campaign on a Testbed (already open), step by step."""
+
+    def __init__(self, campaign: Campaign, testbed, *, max_step_seconds: float | None = None,
+                 progress: Callable[[Step, float], None] | None = None):
+        self.campaign = campaign
+        self.tb = testbed
+        self.max_step_seconds = max_step_seconds
+        self.progress = progress or (lambda step, fraction: None)
+
+    def run(self, resume: CampaignReport | None = None) -> CampaignReport:
+        """Run the steps; returns the report whatever happens.  Ctrl-C (KeyboardInterrupt
+        in the main thread) ends the campaign cleanly: status "interrupted", the rig made
+        safe and the run's recording closed with that reason."""
+        c = self.campaign
+        report = CampaignReport(c.name, str(c.path), time.time())
+        skip_runs = set(resume.completed_runs) if resume else set()
+        if resume:
+            report.completed_runs = sorted(skip_runs)
+            report.recordings = list(resume.recordings)
+        recordings_before = len(self.tb.recordings)
+        current_run, run_failed = 0, False
+        step: Step | None = None
+        try:
+            for step in c.steps:
+                if step.run and step.run in skip_runs:
+                    report.steps.append(StepResult(step.index, step.label(), "skipped"))
+                    continue
+                if step.run != current_run:
+                    if current_run and not run_failed:
+                        report.completed_runs.append(current_run)
+                    current_run, run_failed = step.run, False
+                if run_failed:                      # the rest of a failed run (next_run policy)
+                    report.steps.append(StepResult(step.index, step.label(), "skipped"))
+                    continue
+                t0 = time.monotonic()
+                self.progress(step, 0.0)
+                try:
+                    self._do(step)
+                except BaseException as exc:
+                    interrupted = isinstance(exc, KeyboardInterrupt)
+                    aborted = isinstance(exc, ScriptAborted)
+                    status = "interrupted" if interrupted else "aborted" if aborted else "failed"
+                    report.steps.append(StepResult(step.index, step.label(), status,
+                                                   time.monotonic() - t0, _reason(exc)))
+                    run_failed = True
+                    if step.run and status == "failed" and c.on_run_failure == "next_run" \
+                            and isinstance(exc, GroundStationError):
+                        report.failed_runs[str(step.run)] = f"{step.label()}: {_reason(exc)}"
+                        self.tb.recover(f"run {step.run} failed: {_reason(exc)}")
+                        continue
+                    report.status = status
+                    report.failed_step, report.failed_run = step.index, step.run or None
+                    report.reason = f"{step.label()}: {_reason(exc)}"
+                    if not isinstance(exc, (GroundStationError, KeyboardInterrupt)):
+                        report.reason += "\n" + traceback.format_exc()
+                    break
+                report.steps.append(StepResult(step.index, step.label(), "done", time.monotonic() - t0))
+                self.progress(step, 1.0)
+            else:
+                if current_run and not run_failed:
+                    report.completed_runs.append(current_run)
+                report.status = "completed_with_failures" if report.failed_runs else "completed"
+        except KeyboardInterrupt:
+            # Ctrl-C between two steps (or while a failed run was being recovered)
+            report.status = "interrupted"
+            if step is not None:
+                report.failed_step, report.failed_run = step.index, step.run or None
+                if step.run:
+                    report.completed_runs = [r for r in report.completed_runs if r != step.run]
+            report.reason = (f"{step.label()}: " if step is not None else "") + _reason(KeyboardInterrupt())
+        finally:
+            if report.status not in ("completed", "completed_with_failures"):
+                if report.status == "running":      # an exception of our own: say so
+                    report.status = "failed"
+                with _interrupts_deferred():        # a second Ctrl-C must not cut this short
+                    self.tb.make_safe(report.reason.splitlines()[0] if report.reason else "campaign stopped")
+            report.recordings += self._recordings(recordings_before)
+            report.completed_runs = sorted(set(report.completed_runs))
+            report.finished = time.time()
+        return report
+
+    def _recordings(self, since: int) -> list[dict[str, Any]]:
+        return [dict(rec) for rec in self.tb.recordings[since:]]
+
+    def _do(self, step: Step) -> None:
+        """Do one step with its action's handler (the GUI's runner wraps this)."""
+        handler = ACTIONS.get(step.action)
+        if handler is None:                         # load_campaign admits only registered actions
+            raise GroundStationError(f"no handler for action {step.action!r} "
+                                     f"(known: {known_actions()})")
+        handler.run(StepRun(self.tb, step, self.max_step_seconds, self.progress))
+
+
+@contextlib.contextmanager
+def _interrupts_deferred():
+    """While the rig is being made safe after a Ctrl-C, a second Ctrl-C is noted and
+    ignored (only the main thread can change signal handling; elsewhere: no change)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    try:
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: None)
+    except (ValueError, OSError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+
+
+def _reason(exc: BaseException) -> str:
+    if isinstance(exc, KeyboardInterrupt):
+        return "interrupted by the operator (Ctrl-C)"
+    text = str(exc).strip()
+    return text or type(exc).__name__
