@@ -53,7 +53,7 @@ DEFAULT_TOLERANCE = 0.10
 
 
 def _default_testbed() -> Path:
-    from .sim.testbed import TESTBEDS_DIR
+    from .plant.testbed import TESTBEDS_DIR
 
     return TESTBEDS_DIR / "inertial_2dof.toml"
 
@@ -90,7 +90,7 @@ def _generator(args, testbed, on_sim=None):
 
 
 def _testbed(args):
-    from .sim.testbed import load_testbed
+    from .plant.testbed import load_testbed
 
     return load_testbed(args.testbed or _default_testbed())
 

@@ -29,7 +29,7 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QDoubleSpinBox, QFileDialog
 from ..basemotion import BaseMotionProfile, preview_spectrum
 from ..errors import GroundStationError
 from ..instruments import spec4050 as spec
-from ..sim.testbed import PROFILES_DIR
+from ..plant.testbed import PROFILES_DIR
 from .generator import (DEFAULT_TOLERANCE, SIMULATOR, CheckResult, GeneratorState,
                         ResourceChoice, UploadedProfile, limit_texts, limits_source)
 from .session import Session
@@ -182,7 +182,7 @@ class GeneratorPanel(QWidget):
         lay.setSpacing(3)
         top = QHBoxLayout()
         self.waveform = QComboBox()
-        self.waveform.addItems(["SINE", "SQUARE", "RAMP", "DC", "ARB"])
+        self.waveform.addItems(list(spec.WAVEFORMS))
         self.load = QComboBox()
         self.load.addItem("high-Z (amplifier)", "HZ")
         self.load.addItem("50 ohm", "50")
@@ -248,7 +248,9 @@ class GeneratorPanel(QWidget):
         grid.setHorizontalSpacing(6)
         grid.setVerticalSpacing(2)
         self.duration = _spin(" s", 1, 1.0, 3600.0, 60.0)
-        self.duration.setToolTip("one waveform period (16384 points); the generator plays it at 1/period")
+        self.duration.setToolTip(f"one waveform period, synthesised as {spec.ARB_POINTS_MAX} points "
+                                 f"(an upload takes {limit_texts('ARB', 'HZ', None)['points']}); "
+                                 f"the generator plays it at 1/period")
         self.seed = QSpinBox()
         self.seed.setRange(0, 2 ** 31 - 1)
         self.seed.setToolTip("random phases: the same seed gives the same profile")

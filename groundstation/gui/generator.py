@@ -41,7 +41,7 @@ from ..instruments import (ArbSelection, ArbUpload, BasicWave, FunctionGenerator
                            InstrumentLinkError, OutputState, SafetyLimits, SettingRefusedError,
                            list_resources, open_generator)
 from ..instruments import spec4050 as spec
-from ..sim.testbed import DEFAULT_TESTBED, Testbed, load_testbed
+from ..plant.testbed import DEFAULT_TESTBED, Testbed, load_testbed
 
 log = logging.getLogger(__name__)
 
@@ -131,25 +131,30 @@ class CheckResult:
 
 def limit_texts(waveform: str, load: str | None, limits: SafetyLimits | None) -> dict[str, str]:
     """The allowed range of each setting, short enough to sit next to its field: the
-    instrument's specification for the load, then the testbed's safety limit (volts at
-    the amplifier, expressed as the setting that gives them)."""
+    instrument's range for the load from its limits table (`spec4050.LIMITS`, the rows the
+    driver checks), then the testbed's safety limit (volts at the amplifier, expressed as
+    the setting that gives them).  Keys: frequency, amplitude, offset (with the envelope
+    |offset| + amplitude/2 where it applies), phase, points (uploads)."""
     load_known = load if load in spec.LOADS else "50"     # unknown: the one that doubles
     lname = "high-Z" if load_known == "HZ" else "50 ohm"
-    params = spec.WAVE_PARAMETERS.get(waveform, ())
     unused = "not used by " + waveform
-    fmax = spec.FREQUENCY_MAX_HZ.get(waveform)
-    out = {"frequency": (f"{spec.FREQUENCY_MIN_HZ:g} .. {fmax:g} Hz ({spec.MODEL})"
-                         if "FRQ" in params and fmax else unused),
-           "amplitude": (f"{spec.AMPLITUDE_MIN_VPP[load_known]:g} .. "
-                         f"{spec.AMPLITUDE_MAX_VPP[load_known]:g} Vpp ({spec.MODEL}, {lname})"
-                         if "AMP" in params else unused),
-           "offset": f"±{spec.OFFSET_MAX_V[load_known]:g} V ({spec.MODEL}, {lname})",
-           "phase": (f"{spec.PHASE_MIN_DEG:g} .. {spec.PHASE_MAX_DEG:g} deg" if "PHSE" in params
-                     else unused)}
+
+    def where(row: spec.Limit) -> str:
+        return f" ({spec.MODEL}, {lname})" if row.depends_on_load else f" ({spec.MODEL})"
+
+    out = {}
+    for key in ("frequency", "amplitude", "phase", "points", "offset"):
+        row = spec.limit_for(key, waveform)
+        out[key] = row.range_text(load_known) + where(row) if row else unused
+    envelope = spec.limit_for("envelope", waveform)
+    if envelope is not None:                 # amplitude and offset share the output swing
+        offset = spec.limit_for("offset", waveform)
+        out["offset"] = (f"{offset.range_text(load_known)}; |offset| + amplitude/2 "
+                         f"{envelope.range_text(load_known)}{where(envelope)}")
     if limits is not None:
         # a 50 ohm setting puts twice the setting on the amplifier: the setting may be half
         k = 0.5 if load_known == "50" else 1.0
-        if "AMP" in params:
+        if spec.limit_for("amplitude", waveform):
             out["amplitude"] += f"\ntestbed: ≤ {limits.max_amplitude_vpp * k:g} Vpp"
         out["offset"] += f"\ntestbed: ±{limits.max_offset_v * k:g} V"
     return out

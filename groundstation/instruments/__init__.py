@@ -6,7 +6,15 @@
         fg.set_output(1, True)
     # outputs are off again here (and on abort, on garbage collection, at exit)
 
-The instrument's limits and formats live in `spec4050` (shared with the simulator);
+One job per module:
+  spec4050     what the instrument accepts: the limits table, sample and reply formats
+               (shared with the simulated instrument and the GUI)
+  visa_link    the VISA session: opening, one transaction at a time, I/O errors in one
+               line, outputs off on failure and at the end
+  fg4050       the driver: SCPI commands, channel state, checks before sending
+  records4050  what the instrument reports, parsed (basic wave, output, arb selection)
+  safety       the testbed's own limits ([limits] of the testbed file)
+  fg_errors    the exceptions
 pyvisa is imported only when a generator is opened or resources are listed.
 """
 

@@ -22,6 +22,12 @@ so the driver is first of all a safety layer:
   and at interpreter exit, whatever happened before.  If the session is dead, the
   resource is opened once more to switch them off; closing never raises.
 
+This module is the driver: the SCPI commands, the channel state read back, and the checks
+(the instrument's limits from the table in `spec4050`, the testbed's in `safety`).  The
+VISA session it talks through - opening, locking, I/O errors in one line, outputs off on
+failure - is `visa_link`; the records it reads are `records4050`; its exceptions are
+`fg_errors`.  The names callers use are re-exported here and from the package.
+
 Backends: any pyvisa backend - "@py" (pyvisa-py, the default), "@ivi" (a vendor VISA
 where installed) or "file.yaml@sim" (pyvisa-sim, for tests; it has no binary transfers,
 so arbitrary-waveform uploads through it are refused before anything is sent).
@@ -32,373 +38,28 @@ from __future__ import annotations
 import atexit
 import logging
 import math
-import re
-import threading
-import warnings
 import weakref
-from dataclasses import dataclass
 from typing import Iterable
 
 import numpy as np
 
-from ..errors import GroundStationError, LinkError
+from ..errors import GroundStationError
 from . import spec4050 as spec
+# the records, errors and link are re-exported: callers import them from here or from
+# the package, as they did when this module held everything
+from .fg_errors import (InstrumentError, InstrumentLimitError, InstrumentLinkError,
+                        SafetyLimitError, SettingRefusedError)
+from .records4050 import ArbSelection, ArbUpload, BasicWave, OutputState
+from .safety import SafetyLimits
 from .spec4050 import Identity
+from .visa_link import (ResourceListing, VisaLink, io_failure, list_resources,
+                        normalise_backend, resource_manager, shorten)
 
 log = logging.getLogger(__name__)
 
-DEFAULT_BACKEND = "@py"
-SHUTDOWN_TIMEOUT_MS = 1000          # closing must not hang on a dead link
-
-
-# ---------------------------------------------------------------------------------- errors
-class InstrumentError(GroundStationError):
-    """The instrument reported an error for a command (its own text is in the message)."""
-
-    def __init__(self, message: str, command: str = "", instrument_text: str = ""):
-        super().__init__(message)
-        self.command = command
-        self.instrument_text = instrument_text
-
-
-class InstrumentLinkError(LinkError):
-    """The instrument cannot be opened or stopped answering (VISA I/O error, timeout)."""
-
-
-class SettingRefusedError(GroundStationError):
-    """A setting was refused before anything was sent (value, limit and its source named)."""
-
-    def __init__(self, message: str, *, setting: str, value: float | str, limit: float | str,
-                 source: str):
-        super().__init__(message)
-        self.setting = setting
-        self.value = value
-        self.limit = limit
-        self.source = source
-
-
-class InstrumentLimitError(SettingRefusedError):
-    """Beyond what the 4050-series generator accepts (its specification)."""
-
-
-class SafetyLimitError(SettingRefusedError):
-    """Beyond what the testbed tolerates (the testbed file's [limits])."""
-
-
-# ---------------------------------------------------------------------------------- records
-@dataclass(frozen=True)
-class SafetyLimits:
-    """What the stage tolerates, in volts at the high-impedance amplifier input."""
-
-    max_amplitude_vpp: float
-    max_offset_v: float
-    source: str                  # where the numbers come from, quoted in every refusal
-
-    @classmethod
-    def from_testbed(cls, testbed) -> "SafetyLimits":
-        lim = testbed.limits
-        return cls(float(lim["fg_max_amplitude"]), float(lim["fg_max_offset"]),
-                   f"{testbed.path} [limits]")
-
-
-@dataclass(frozen=True)
-class BasicWave:
-    """One channel's basic-wave settings (None: not applicable to this waveform / unknown)."""
-
-    waveform: str
-    frequency_hz: float | None = None
-    amplitude_vpp: float | None = None
-    offset_v: float | None = None
-    phase_deg: float | None = None
-
-    @classmethod
-    def parse(cls, reply: str) -> "BasicWave":
-        try:
-            p = spec.pairs(spec.split_reply(reply, "BSWV"))
-            num = {k: spec.parse_number(p[k]) if k in p else None
-                   for k in ("FRQ", "AMP", "OFST", "PHSE")}
-            return cls(p["WVTP"].upper(), num["FRQ"], num["AMP"], num["OFST"], num["PHSE"])
-        except (KeyError, ValueError) as exc:
-            raise InstrumentError(f"cannot read the basic-wave reply {reply!r}: {exc}") from None
-
-    def command_pairs(self, previous: "BasicWave | None" = None) -> list[tuple[str, float | str]]:
-        """BSWV name,value pairs for this state; AMP before OFST when the amplitude
-        shrinks, after it when it grows, so every intermediate state stays in the envelope."""
-        values = {"FRQ": self.frequency_hz, "AMP": self.amplitude_vpp,
-                  "OFST": self.offset_v, "PHSE": self.phase_deg}
-        names = list(spec.WAVE_PARAMETERS[self.waveform])
-        grows = (previous is not None and previous.amplitude_vpp is not None
-                 and self.amplitude_vpp is not None
-                 and self.amplitude_vpp > previous.amplitude_vpp)
-        if grows and "AMP" in names and "OFST" in names:
-            names.remove("OFST")
-            names.insert(names.index("AMP"), "OFST")
-        return [("WVTP", self.waveform)] + [(n, values[n]) for n in names]
-
-
-@dataclass(frozen=True)
-class OutputState:
-    on: bool
-    load: str | None             # "HZ" or "50"; None when the instrument did not say
-
-    @classmethod
-    def parse(cls, reply: str) -> "OutputState":
-        fields = spec.split_reply(reply, "OUTP")
-        try:
-            state = fields[0].upper()
-            if state not in ("ON", "OFF"):
-                raise ValueError(f"state {fields[0]!r}")
-            extra = spec.pairs(fields[1:])
-            load = spec.normalise_load(extra["LOAD"]) if "LOAD" in extra else None
-        except (IndexError, ValueError) as exc:
-            raise InstrumentError(f"cannot read the output reply {reply!r}: {exc}") from None
-        return cls(state == "ON", load)
-
-
-@dataclass(frozen=True)
-class ArbSelection:
-    index: int | None            # built-in waveform index, None for a user waveform
-    name: str | None
-
-    @classmethod
-    def parse(cls, reply: str) -> "ArbSelection":
-        try:
-            p = spec.pairs(spec.split_reply(reply, "ARWV"))
-            index = int(p["INDEX"]) if "INDEX" in p else None
-        except ValueError as exc:
-            raise InstrumentError(f"cannot read the arbitrary-wave reply {reply!r}: {exc}") from None
-        return cls(index, p.get("NAME"))
-
-
-@dataclass(frozen=True)
-class ArbUpload:
-    """What `upload_arbitrary` sent: the waveform plays at `frequency_hz` = 1/period."""
-
-    channel: int
-    name: str
-    points: int
-    frequency_hz: float
-    amplitude_vpp: float
-    offset_v: float
-    codes: np.ndarray            # the int16 samples as sent
-
-
-@dataclass(frozen=True)
-class ResourceListing:
-    backend: str
-    resources: tuple[str, ...]
-    notes: tuple[str, ...]       # why a backend could not list, backend warnings
-
-
-# ---------------------------------------------------------------------------------- helpers
-def normalise_backend(backend: str | None) -> str:
-    """None -> '@py'; 'tests/fg.yaml' -> 'tests/fg.yaml@sim'."""
-    if not backend:
-        return DEFAULT_BACKEND
-    if backend.endswith((".yaml", ".yml")):
-        return backend + "@sim"
-    return backend
-
-
-def _resource_manager(backend: str):
-    import pyvisa
-
-    try:
-        return pyvisa.ResourceManager(backend)
-    except (OSError, ValueError, ImportError, pyvisa.errors.Error) as exc:
-        hint = (" (install a vendor VISA library, or use @py)" if backend == "@ivi"
-                else "")
-        raise InstrumentLinkError(f"VISA backend {backend!r} is not available: "
-                                  f"{_brief(exc)}{hint}") from None
-
-
-def _brief(exc: BaseException, limit: int = 300) -> str:
-    """One readable line from a backend's exception (pyvisa-sim puts whole tracebacks
-    into its messages): the last 'SomethingError: ...' line if there is one."""
-    lines = [ln.strip().strip("'\\n") for ln in str(exc).replace("\\n", "\n").splitlines()]
-    lines = [ln for ln in lines if ln]
-    if not lines:
-        return type(exc).__name__
-    errors = [ln for ln in lines if re.match(r"^[A-Za-z_.]*(Error|Exception): ", ln)]
-    text = errors[-1] if errors else lines[0]
-    return text if len(text) <= limit else text[:limit] + "..."
-
-
-def list_resources(backend: str | None = None, query: str = "?*::INSTR") -> ResourceListing:
-    """The VISA resources a backend can see; never raises.
-
-    pyvisa-py reports the limits of its discovery (no psutil, no zeroconf, no USB
-    library) as warnings: they are returned as notes for the user (and logged) instead
-    of being printed by the warnings machinery."""
-    backend = normalise_backend(backend)
-    notes: list[str] = []
-    found: tuple[str, ...] = ()
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        try:
-            rm = _resource_manager(backend)
-        except InstrumentLinkError as exc:
-            notes.append(str(exc))
-        else:
-            try:
-                found = tuple(rm.list_resources(query))
-            except Exception as exc:      # any backend failure means "nothing found here"
-                notes.append(f"listing {query} on {backend} failed: {exc}")
-            finally:
-                _release_manager(rm)
-    for w in caught:
-        if issubclass(w.category, ResourceWarning):   # the backend's own leak, not news
-            log.debug("%s: %s", backend, w.message)
-        else:
-            notes.append(str(w.message))
-    for note in notes:
-        log.info("VISA listing: %s", note)
-    return ResourceListing(backend, found, tuple(notes))
-
-
-def _release_manager(rm) -> None:
-    """Close a resource manager unless sessions are still open through it.
-
-    pyvisa hands out one ResourceManager per VISA library (ResourceManager("@py") twice
-    is the same object), and closing it closes every session opened through it: listing
-    the resources, or closing one generator, must not cut another generator off."""
-    try:
-        if rm.list_opened_resources():
-            return
-        rm.close()
-    except Exception as exc:
-        log.debug("closing the resource manager: %s", exc)
-
-
-def _is_timeout(exc: BaseException) -> bool:
-    import pyvisa
-
-    return (isinstance(exc, pyvisa.errors.VisaIOError)
-            and exc.error_code == pyvisa.constants.StatusCode.error_timeout)
-
-
-def _io_failure(exc: BaseException, *, reading: bool, timeout_ms: int | None, backend: str) -> str:
-    """Why one VISA transaction failed, in one line that says what to do about it.
-
-    Anything a backend raises while a message goes out or a reply comes back is an I/O
-    failure to the driver: VISA errors, dropped sockets, and also a reply that is not text
-    (UnicodeDecodeError from pyvisa's decoding) or a message a backend could not take
-    (pyvisa-sim decodes every message it receives as UTF-8)."""
-    if _is_timeout(exc):
-        t = f"{timeout_ms / 1000:g} s" if timeout_ms else "the VISA timeout"
-        return (f"no answer within {t} (VISA timeout): check that the generator is on and "
-                f"connected and that this is its address (a slow instrument needs a longer "
-                f"--timeout)")
-    if isinstance(exc, UnicodeDecodeError):
-        bad = exc.object[exc.start:exc.start + 8]
-        if reading:
-            return (f"the reply is not text (byte {bad[:1]!r} at position {exc.start} cannot be "
-                    f"decoded as {exc.encoding}): the link is corrupting data, or another "
-                    f"program is talking to the instrument - check the cable and close other "
-                    f"VISA programs")
-        hint = (" - pyvisa-sim cannot carry binary data" if backend.endswith("@sim") else "")
-        return (f"the VISA backend {backend} could not take the message (it decodes it as "
-                f"{exc.encoding} and byte {bad[:1]!r} at position {exc.start} is not text){hint}")
-    if isinstance(exc, UnicodeEncodeError):
-        return f"the message is not ASCII text ({exc.reason} at position {exc.start})"
-    text = _brief(exc)
-    name = type(exc).__name__
-    return text if text.startswith(name) else f"{name}: {text}"
-
-
-# ---------------------------------------------------------------------------------- the link
-class _Link:
-    """The VISA session and what it takes to switch the outputs off at the end.
-
-    Holds no reference to the driver, so a weakref finaliser and an atexit handler can
-    use it after the driver is gone."""
-
-    def __init__(self, rm, resource_name: str, backend: str, timeout_ms: int):
-        self.rm = rm
-        self.resource_name = resource_name
-        self.backend = backend
-        self.timeout_ms = timeout_ms
-        self.lock = threading.RLock()
-        self.inst = None
-        self.closed = False
-        #: set once *IDN? named a 4050-series generator: only then does shutdown send
-        #: output commands (never to an instrument of unknown kind, nor to nothing)
-        self.is_generator = False
-
-    def open_session(self, timeout_ms: int | None = None):
-        inst = self.rm.open_resource(self.resource_name, read_termination="\n",
-                                     write_termination="\n",
-                                     timeout=timeout_ms or self.timeout_ms)
-        return inst
-
-    @staticmethod
-    def _off(inst) -> None:
-        """Both outputs off, confirmed by *OPC? (a write alone may vanish into a dead socket)."""
-        for ch in spec.CHANNELS:
-            inst.write(f"C{ch}:OUTP OFF")
-        if inst.query("*OPC?").strip() not in ("1", "+1"):
-            raise InstrumentError("the generator did not confirm switching its outputs off")
-
-    def outputs_off(self, *, reopen: bool = True) -> None:
-        """Switch both outputs off on the session or, if it is dead, on a new one."""
-        with self.lock:
-            first: Exception | None = None
-            if self.inst is not None:
-                try:
-                    self._off(self.inst)
-                    return
-                except Exception as exc:       # dead link: try again on a fresh session
-                    first = exc
-            if not reopen:
-                raise InstrumentLinkError(f"could not switch the outputs of {self.resource_name} "
-                                          f"off: {first}")
-            try:
-                inst = self.open_session(SHUTDOWN_TIMEOUT_MS)
-            except Exception as exc:
-                raise InstrumentLinkError(
-                    f"could not switch the outputs of {self.resource_name} off: {first or exc}; "
-                    f"re-opening failed: {exc}") from None
-            try:
-                self._off(inst)
-            except Exception as exc:
-                self._close_quietly(inst)
-                raise InstrumentLinkError(f"could not switch the outputs of {self.resource_name} "
-                                          f"off: {exc}") from None
-            self._close_quietly(self.inst)
-            inst.timeout = self.timeout_ms
-            self.inst = inst
-            log.warning("%s: the session had failed (%s); outputs switched off on a new one",
-                        self.resource_name, first)
-
-    @staticmethod
-    def _close_quietly(obj) -> None:
-        if obj is None:
-            return
-        try:
-            obj.close()
-        except Exception as exc:
-            log.debug("closing %r: %s", obj, exc)
-
-    def shutdown(self) -> None:
-        """Outputs off, session and resource manager closed.  Idempotent; never raises."""
-        with self.lock:
-            if self.closed:
-                return
-            self.closed = True
-            try:
-                atexit.unregister(self.shutdown)
-            except Exception:
-                pass
-            if self.is_generator:
-                try:
-                    if self.inst is not None:
-                        self.inst.timeout = SHUTDOWN_TIMEOUT_MS
-                    self.outputs_off()
-                except Exception as exc:
-                    log.error("%s: outputs may still be ON: %s", self.resource_name, exc)
-            self._close_quietly(self.inst)
-            self.inst = None
-            _release_manager(self.rm)
+INSTRUMENT_SOURCE = f"the {spec.MODEL} specification (groundstation/instruments/spec4050.py)"
+#: how a message names a derived quantity
+_SPOKEN = {"envelope": "|offset| + amplitude/2 ="}
 
 
 # ---------------------------------------------------------------------------------- driver
@@ -407,11 +68,11 @@ class FunctionGenerator4050:
 
     All methods are safe to call from several threads (one transaction at a time)."""
 
-    def __init__(self, link: _Link, *, limits: SafetyLimits | None = None, check_model: bool = True):
+    def __init__(self, link: VisaLink, *, limits: SafetyLimits | None = None, check_model: bool = True):
         self._link = link
         self.limits = limits
         self.resource_name = link.resource_name
-        self._finalizer = weakref.finalize(self, _Link.shutdown, link)
+        self._finalizer = weakref.finalize(self, VisaLink.shutdown, link)
         self._finalizer.atexit = False          # the atexit handler below runs first instead
         # registered after pyvisa's own atexit handler for this resource manager, so it
         # runs before it (atexit is last-in, first-out) while the session still works
@@ -453,42 +114,18 @@ class FunctionGenerator4050:
 
     # ------------------------------------------------------------------ low level
     def _require_open(self) -> None:
-        if self._link.closed:
-            raise InstrumentLinkError(f"{self.resource_name} is closed")
-
-    def _io_error(self, what: str, exc: BaseException, *, reading: bool = False
-                  ) -> InstrumentLinkError:
-        # the backend's traceback is for a developer (debug log), the line for the user
-        log.debug("%s: %s failed", self.resource_name, what, exc_info=exc)
-        why = _io_failure(exc, reading=reading, timeout_ms=self._link.timeout_ms,
-                          backend=self._link.backend)
-        return InstrumentLinkError(f"{self.resource_name}: {what} failed: {why}")
+        self._link.require_open()
 
     def query(self, command: str) -> str:
         """Send a query and return the reply line (no error check: replies are data).
 
         Any failure of the exchange (VISA error, timeout, dropped link, a reply that is not
         text) raises InstrumentLinkError naming the query and what to check."""
-        self._require_open()
-        with self._link.lock:
-            try:
-                return self._link.inst.query(command).strip()
-            except Exception as exc:          # whatever the backend raised: an I/O failure
-                raise self._io_error(f"query {command!r}", exc, reading=True) from None
+        return self._link.query(command)
 
     def _write_checked(self, command: str, binary: np.ndarray | None = None) -> None:
-        self._require_open()
         with self._link.lock:
-            try:
-                if binary is None:
-                    self._link.inst.write(command)
-                else:
-                    self._link.inst.write_binary_values(command, binary, datatype="h",
-                                                        is_big_endian=False, header_fmt="empty")
-            except Exception as exc:          # whatever the backend raised: an I/O failure
-                what = (f"sending {_shorten(command)!r}" if binary is None else
-                        f"sending {_shorten(command)!r} with {2 * len(binary)} bytes of samples")
-                raise self._io_error(what, exc) from None
+            self._link.write(command, binary)
             self._check_errors(command)
 
     def _check_errors(self, command: str) -> None:
@@ -500,7 +137,7 @@ class FunctionGenerator4050:
                 raise ValueError("not an 8-bit register")
         except (ValueError, OverflowError):
             raise InstrumentError(f"{self.resource_name}: unexpected *ESR? reply {reply!r} "
-                                  f"after {_shorten(command)!r} (not a status register value); "
+                                  f"after {shorten(command)!r} (not a status register value); "
                                   f"the setting may or may not have been taken - read the "
                                   f"channel back before going on") from None
         bits = [name for bit, name in spec.ESR_ERROR_BITS.items() if esr & bit]
@@ -508,7 +145,7 @@ class FunctionGenerator4050:
             return
         texts = self._error_texts()
         text = "; ".join(texts) if texts else ", ".join(bits)
-        raise InstrumentError(f"{self.resource_name} refused {_shorten(command)!r}: {text}",
+        raise InstrumentError(f"{self.resource_name} refused {shorten(command)!r}: {text}",
                               command, text)
 
     def _error_texts(self) -> list[str]:
@@ -590,6 +227,7 @@ class FunctionGenerator4050:
         return self.output_state(channel).load
 
     # ------------------------------------------------------------------ checks
+    # ------------------------------------------------------------------ checks
     def check(self, channel: int, wave: BasicWave, load: str | None, *,
               safety: bool = True) -> None:
         """Raise InstrumentLimitError / SafetyLimitError if `wave` into `load` is not
@@ -598,77 +236,33 @@ class FunctionGenerator4050:
         commands while the output is off: the instrument must take it, the stage never
         sees it)."""
         ch = _channel(channel)
-        instrument = f"the {spec.MODEL} specification (groundstation/instruments/spec4050.py)"
         if wave.waveform not in spec.WAVEFORMS:
-            raise InstrumentLimitError(
-                f"channel {ch}: waveform {wave.waveform!r} is not one this driver sets "
-                f"({', '.join(spec.WAVEFORMS)}); nothing was sent", setting="waveform",
-                value=wave.waveform, limit=", ".join(spec.WAVEFORMS), source=instrument)
+            raise InstrumentLimitError.on_channel(
+                ch, f"waveform {wave.waveform!r} is not one this driver sets "
+                f"({', '.join(spec.WAVEFORMS)})", setting="waveform", value=wave.waveform,
+                limit=", ".join(spec.WAVEFORMS), source=INSTRUMENT_SOURCE)
         load_known = load if load is not None else "50"
-        lname = "high-impedance" if load_known == "HZ" else "50 ohm"
         needed = spec.WAVE_PARAMETERS[wave.waveform]
         values = {"FRQ": wave.frequency_hz, "AMP": wave.amplitude_vpp,
                   "OFST": wave.offset_v, "PHSE": wave.phase_deg}
         for name in needed:
             v = values[name]
             if v is None or not math.isfinite(v):
-                raise InstrumentLimitError(
-                    f"channel {ch}: {_LABEL[name]} is {'unknown' if v is None else v} for "
+                raise InstrumentLimitError.on_channel(
+                    ch, f"{_LABEL[name]} is {'unknown' if v is None else v} for "
                     f"{wave.waveform} (give it explicitly: the driver sends only settings it "
-                    f"has checked); nothing was sent", setting=_LABEL[name],
-                    value=str(v), limit="a finite number", source=instrument)
-
-        def refuse(cls, name, value, limit, source, text):
-            raise cls(f"channel {ch}: {text}; nothing was sent", setting=name,
-                      value=value, limit=limit, source=source)
-
-        if "FRQ" in needed:
-            f, fmax = wave.frequency_hz, spec.FREQUENCY_MAX_HZ[wave.waveform]
-            if not spec.FREQUENCY_MIN_HZ <= f <= fmax:
-                refuse(InstrumentLimitError, "frequency", f, fmax if f > fmax else spec.FREQUENCY_MIN_HZ,
-                       instrument, f"frequency {f:g} Hz is outside {spec.FREQUENCY_MIN_HZ:g} .. "
-                       f"{fmax:g} Hz for {wave.waveform} ({instrument})")
-        if "PHSE" in needed and not spec.PHASE_MIN_DEG <= wave.phase_deg <= spec.PHASE_MAX_DEG:
-            refuse(InstrumentLimitError, "phase", wave.phase_deg, spec.PHASE_MAX_DEG, instrument,
-                   f"phase {wave.phase_deg:g} deg is outside {spec.PHASE_MIN_DEG:g} .. "
-                   f"{spec.PHASE_MAX_DEG:g} deg ({instrument})")
-        amp = wave.amplitude_vpp if "AMP" in needed else 0.0
-        ofst = wave.offset_v
-        if "AMP" in needed:
-            lo, hi = spec.AMPLITUDE_MIN_VPP[load_known], spec.AMPLITUDE_MAX_VPP[load_known]
-            if not lo <= amp <= hi:
-                refuse(InstrumentLimitError, "amplitude", amp, hi if amp > hi else lo, instrument,
-                       f"amplitude {amp:g} Vpp is outside {lo:g} .. {hi:g} Vpp into a {lname} "
-                       f"load ({instrument})")
-        omax = spec.OFFSET_MAX_V[load_known]
-        if abs(ofst) > omax:
-            refuse(InstrumentLimitError, "offset", ofst, omax, instrument,
-                   f"offset {ofst:g} V is beyond +-{omax:g} V into a {lname} load ({instrument})")
-        emax = spec.ENVELOPE_MAX_V[load_known]
-        if abs(ofst) + amp / 2 > emax:
-            refuse(InstrumentLimitError, "envelope", abs(ofst) + amp / 2, emax, instrument,
-                   f"|offset| + amplitude/2 = {abs(ofst) + amp / 2:g} V is beyond {emax:g} V into "
-                   f"a {lname} load ({instrument})")
+                    f"has checked)", setting=_LABEL[name], value=str(v),
+                    limit="a finite number", source=INSTRUMENT_SOURCE)
+        violation = spec.first_violation(wave.waveform, load_known, spec.wave_quantities(
+            wave.waveform, frequency_hz=wave.frequency_hz, amplitude_vpp=wave.amplitude_vpp,
+            offset_v=wave.offset_v, phase_deg=wave.phase_deg))
+        if violation is not None:
+            raise instrument_refusal(ch, violation)
         if self.limits is None or not safety:
             return
-        lim = self.limits
-        note = ("" if load_known == "HZ" else
-                f" (with the load at {'50 ohm' if load else 'an unknown value, taken as 50 ohm'}: "
-                f"into the high-impedance amplifier input the real voltage is twice the setting)")
-        if "AMP" in needed:
-            real = spec.volts_at_high_z(amp, load_known)
-            if real > lim.max_amplitude_vpp:
-                refuse(SafetyLimitError, "amplitude", real, lim.max_amplitude_vpp, lim.source,
-                       f"amplitude {real:g} Vpp at the amplifier is above the testbed's safety "
-                       f"limit of {lim.max_amplitude_vpp:g} Vpp (fg_max_amplitude in "
-                       f"{lim.source}){note}")
-        real_ofst = spec.volts_at_high_z(ofst, load_known)
-        if abs(real_ofst) > lim.max_offset_v:
-            refuse(SafetyLimitError, "offset", real_ofst, lim.max_offset_v, lim.source,
-                   f"offset {real_ofst:g} V at the amplifier is beyond the testbed's safety "
-                   f"limit of +-{lim.max_offset_v:g} V (fg_max_offset in {lim.source}){note}")
+        self.limits.check(ch, amplitude_vpp=wave.amplitude_vpp if "AMP" in needed else None,
+                          offset_v=wave.offset_v, load=load)
 
-    # ------------------------------------------------------------------ settings
     def configure(self, channel: int, *, waveform: str | None = None,
                   frequency_hz: float | None = None, amplitude_vpp: float | None = None,
                   offset_v: float | None = None, phase_deg: float | None = None,
@@ -819,12 +413,15 @@ class FunctionGenerator4050:
         ch = _channel(channel)
         _check_arb_name(ch, name)
         v = np.asarray(list(volts) if not isinstance(volts, np.ndarray) else volts, dtype=float)
-        source = f"the {spec.MODEL} specification (groundstation/instruments/spec4050.py)"
-        if v.ndim != 1 or not spec.ARB_POINTS_MIN <= len(v) <= spec.ARB_POINTS_MAX:
-            raise InstrumentLimitError(
-                f"channel {ch}: an arbitrary waveform has {spec.ARB_POINTS_MIN} .. "
-                f"{spec.ARB_POINTS_MAX} points, not {v.size}; nothing was sent", setting="points",
-                value=int(v.size), limit=spec.ARB_POINTS_MAX, source=source)
+        source = INSTRUMENT_SOURCE
+        points = spec.limit_for("points", "ARB")
+        # the point count does not depend on the load: either load reads the same range
+        outside = spec.first_violation("ARB", "HZ", {"points": v.size}) if v.ndim == 1 else None
+        if v.ndim != 1 or outside is not None:
+            raise InstrumentLimitError.on_channel(
+                ch, f"an arbitrary waveform has {points.range_text('HZ')}, not {v.size}",
+                setting="points", value=int(v.size),
+                limit=outside.bound if outside else points.high_z[1], source=source)
         if not np.all(np.isfinite(v)):
             raise InstrumentLimitError(f"channel {ch}: the waveform has non-finite samples; "
                                        f"nothing was sent", setting="samples", value="nan/inf",
@@ -897,8 +494,24 @@ def _check_arb_name(ch: int, name: str) -> None:
             limit=spec.ARB_NAME_PATTERN.pattern, source=f"the {spec.MODEL} specification")
 
 
-def _shorten(command: str, n: int = 120) -> str:
-    return command if len(command) <= n else command[:n] + "..."
+def instrument_refusal(channel: int, violation: spec.Violation) -> InstrumentLimitError:
+    """A row of the limits table that a setting fell outside, in words: the setting, its
+    value, the range, the waveform where the range depends on it, the load where it
+    depends on that, and where the figures come from."""
+    row, load = violation.limit, violation.load
+    if row.form == "between":
+        text = f"{row.key} {violation.value:g} {row.unit} is outside {row.range_text(load)}"
+    else:
+        spoken = _SPOKEN.get(row.key, row.key)
+        text = (f"{spoken} {violation.value:g} {row.unit} is beyond "
+                f"{row.range_text(load, plus_minus='+-', at_most='')}")
+    if spec.varies_by_waveform(row.key):
+        text += f" for {violation.waveform}"
+    if row.depends_on_load:
+        text += f" into a {spec.LOAD_NAMES[load]} load"
+    return InstrumentLimitError.on_channel(channel, f"{text} ({INSTRUMENT_SOURCE})",
+                                           setting=row.key, value=violation.value,
+                                           limit=violation.bound, source=INSTRUMENT_SOURCE)
 
 
 def open_generator(resource: str, *, backend: str | None = None, limits: SafetyLimits | None = None,
@@ -917,8 +530,8 @@ def open_generator(resource: str, *, backend: str | None = None, limits: SafetyL
         raise InstrumentLinkError(f"cannot open {resource}: the VISA timeout must be a number "
                                   f"of seconds of at least 0.001, not {timeout_s!r}")
     backend = normalise_backend(backend)
-    rm = _resource_manager(backend)
-    link = _Link(rm, resource, backend, int(timeout_s * 1000))
+    rm = resource_manager(backend)
+    link = VisaLink(rm, resource, backend, int(timeout_s * 1000))
     try:
         return FunctionGenerator4050(link, limits=limits, check_model=check_model)
     except GroundStationError:
@@ -926,11 +539,11 @@ def open_generator(resource: str, *, backend: str | None = None, limits: SafetyL
     except Exception as exc:       # VISA errors; ValueError etc. for malformed addresses
         link.shutdown()
         log.debug("opening %s on %s failed", resource, backend, exc_info=exc)
-        why = _io_failure(exc, reading=True, timeout_ms=link.timeout_ms, backend=backend)
+        why = io_failure(exc, reading=True, timeout_ms=link.timeout_ms, backend=backend)
         raise InstrumentLinkError(f"cannot open {resource} on {backend}: {why}") from None
 
 
 __all__ = ["ArbSelection", "ArbUpload", "BasicWave", "FunctionGenerator4050", "Identity",
            "InstrumentError", "InstrumentLimitError", "InstrumentLinkError", "OutputState",
            "ResourceListing", "SafetyLimitError", "SafetyLimits", "SettingRefusedError",
-           "list_resources", "open_generator"]
+           "list_resources", "normalise_backend", "open_generator"]

@@ -1,5 +1,13 @@
 """What the B&K Precision 4050-series generator (4053B) accepts: the one place for its limits,
-sample format and reply formats, shared by the pyvisa driver and the simulated instrument.
+sample format and reply formats, shared by the pyvisa driver, the simulated instrument and
+the GUI.
+
+The limits are one declarative table, `LIMITS`: a row per quantity and range (key, unit,
+range with the load at high impedance and at 50 ohm, the waveforms it applies to, the
+field the instrument's command calls it).  `first_violation()` applies it for the driver
+and the simulator alike, `Limit.range_text()` words it for messages and the GUI.  The
+testbed's own safety limits are not here: they are the testbed's fact (its file's
+[limits], `instruments.safety`).
 
 Sources: `reference/instruments.md` (command family, binary upload with a header of
 name/value pairs, "14-bit values are common", "in the order of 16 k" points) and the
@@ -41,30 +49,161 @@ CHANNELS = (1, 2)
 #: carry parameters the base stage has no use for; they are parsed on read, never set)
 WAVEFORMS = ("SINE", "SQUARE", "RAMP", "ARB", "DC")
 ALL_WAVEFORMS = WAVEFORMS + ("PULSE", "NOISE")
-#: which BSWV parameters apply to each waveform (the instrument rejects or ignores others)
-WAVE_PARAMETERS = {
-    "SINE": ("FRQ", "AMP", "OFST", "PHSE"),
-    "SQUARE": ("FRQ", "AMP", "OFST", "PHSE"),
-    "RAMP": ("FRQ", "AMP", "OFST", "PHSE"),
-    "ARB": ("FRQ", "AMP", "OFST", "PHSE"),
-    "DC": ("OFST",),
-}
+_PERIODIC = ("SINE", "SQUARE", "RAMP", "ARB")       # the waveforms with an amplitude
 
-# --- frequency (Hz) --------------------------------------------------------------------------
-FREQUENCY_MIN_HZ = 1e-6
-FREQUENCY_MAX_HZ = {"SINE": 10e6, "SQUARE": 5e6, "RAMP": 300e3, "ARB": 5e6}   # 4053B; VERIFY
-
-# --- level (V), per load -----------------------------------------------------------------------
 LOADS = ("HZ", "50")
-AMPLITUDE_MIN_VPP = {"HZ": 0.002, "50": 0.001}
-AMPLITUDE_MAX_VPP = {"HZ": 20.0, "50": 10.0}
-OFFSET_MAX_V = {"HZ": 10.0, "50": 5.0}           # |offset|
-ENVELOPE_MAX_V = {"HZ": 10.0, "50": 5.0}         # |offset| + amplitude / 2
-PHASE_MIN_DEG, PHASE_MAX_DEG = 0.0, 360.0
+LOAD_NAMES = {"HZ": "high-impedance", "50": "50 ohm"}
+
+
+# --- the limits table ----------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Limit:
+    """One row of what the instrument accepts: a quantity, its unit, its range with the load
+    set to high impedance and to 50 ohm, and the waveforms whose setting it limits.
+
+    `form` says how the range reads (and so how every consumer words it): "between" is
+    low .. high, "plus_minus" is a magnitude range +-high (low = -high), "at_most" is a
+    ceiling on a quantity that cannot be negative (low = 0)."""
+
+    key: str                         # the setting's name in messages and in the GUI
+    unit: str
+    high_z: tuple[float, float]      # (lowest, highest) accepted with LOAD HZ
+    fifty_ohm: tuple[float, float]   # ... with LOAD 50
+    waveforms: tuple[str, ...]
+    field: str                       # what the instrument's command calls it
+    form: str = "between"
+    note: str = ""                   # where the figure comes from / what is unconfirmed
+
+    def bounds(self, load: str) -> tuple[float, float]:
+        return self.high_z if load == "HZ" else self.fifty_ohm
+
+    @property
+    def depends_on_load(self) -> bool:
+        return self.high_z != self.fifty_ohm
+
+    def range_text(self, load: str, *, between: str = " .. ", plus_minus: str = "±",
+                   at_most: str = "≤ ") -> str:
+        """The one wording of a range - '0.002 .. 20 Vpp', '±10 V', '≤ 10 V' - with the
+        symbols each consumer uses (the driver's messages stay ASCII, the GUI does not)."""
+        low, high = self.bounds(load)
+        if self.form == "plus_minus":
+            return f"{plus_minus}{high:g} {self.unit}"
+        if self.form == "at_most":
+            return f"{at_most}{high:g} {self.unit}"
+        return f"{low:g}{between}{high:g} {self.unit}"
+
+
+_BOTH = lambda low, high: dict(high_z=(low, high), fifty_ohm=(low, high))   # noqa: E731
+
+#: The 4053B's limits, one row per (quantity, range): every check of the driver, every
+#: refusal of the simulated instrument and every limit text of the GUI is derived from
+#: these rows (tests/test_fg_limits_table.py holds the three to it).  The order is the
+#: order of the checks, so the first refusal named is the same everywhere.
+LIMITS: tuple[Limit, ...] = (
+    Limit("frequency", "Hz", waveforms=("SINE",), field="FRQ", **_BOTH(1e-6, 10e6),
+          note="4053B data sheet; VERIFY"),
+    Limit("frequency", "Hz", waveforms=("SQUARE",), field="FRQ", **_BOTH(1e-6, 5e6),
+          note="4053B data sheet; VERIFY"),
+    Limit("frequency", "Hz", waveforms=("RAMP",), field="FRQ", **_BOTH(1e-6, 300e3),
+          note="4053B data sheet; VERIFY"),
+    Limit("frequency", "Hz", waveforms=("ARB",), field="FRQ", **_BOTH(1e-6, 5e6),
+          note="4053B data sheet; VERIFY"),
+    Limit("phase", "deg", waveforms=_PERIODIC, field="PHSE", **_BOTH(0.0, 360.0)),
+    # amplitude and offset are settings into the load the instrument is told about: into
+    # 50 ohm the 50 ohm source halves what it can put across the load
+    Limit("amplitude", "Vpp", waveforms=_PERIODIC, field="AMP",
+          high_z=(0.002, 20.0), fifty_ohm=(0.001, 10.0)),
+    Limit("offset", "V", waveforms=WAVEFORMS, field="OFST", form="plus_minus",
+          high_z=(-10.0, 10.0), fifty_ohm=(-5.0, 5.0)),
+    # the output swing as a whole: |offset| + amplitude/2 (HLEV/LLEV) stays inside the rail
+    Limit("envelope", "V", waveforms=_PERIODIC, field="|OFST|+AMP/2", form="at_most",
+          high_z=(0.0, 10.0), fifty_ohm=(0.0, 5.0)),
+    # one period of a user arbitrary waveform (16 kpts; reference: "in the order of 16 k")
+    Limit("points", "points", waveforms=("ARB",), field="LENGTH", **_BOTH(2, 16384),
+          note="VERIFY against the programming manual"),
+)
+
+#: the basic-wave settings: the BSWV fields a waveform takes, in the instrument's order
+_BSWV_FIELDS = ("FRQ", "AMP", "OFST", "PHSE")
+#: which BSWV parameters apply to each waveform (the instrument rejects or ignores others)
+WAVE_PARAMETERS = {w: tuple(f for f in _BSWV_FIELDS
+                            if any(row.field == f and w in row.waveforms for row in LIMITS))
+                   for w in WAVEFORMS}
+
+
+def limit_for(key: str, waveform: str) -> Limit | None:
+    """The row limiting `key` for `waveform` (None: the setting does not apply to it)."""
+    return next((row for row in LIMITS if row.key == key and waveform in row.waveforms), None)
+
+
+def varies_by_waveform(key: str) -> bool:
+    """True when `key` has different ranges for different waveforms (so a message names
+    the waveform)."""
+    return len({(row.high_z, row.fifty_ohm) for row in LIMITS if row.key == key}) > 1
+
+
+@dataclass(frozen=True)
+class Violation:
+    """A value outside its row: what the driver and the simulator each put into words."""
+
+    limit: Limit
+    value: float
+    load: str
+    waveform: str
+
+    @property
+    def bound(self) -> float:
+        """The end of the range that was passed (the magnitude for plus_minus rows)."""
+        low, high = self.limit.bounds(self.load)
+        if self.limit.form == "plus_minus":
+            return high
+        return high if self.value > high else low
+
+
+def wave_quantities(waveform: str, *, frequency_hz: float | None, amplitude_vpp: float | None,
+                    offset_v: float | None, phase_deg: float | None) -> dict[str, float]:
+    """The quantities the table limits for one basic-wave state (those that apply to the
+    waveform; the envelope computed from amplitude and offset)."""
+    given = {"frequency": frequency_hz, "amplitude": amplitude_vpp, "offset": offset_v,
+             "phase": phase_deg}
+    out = {k: v for k, v in given.items() if v is not None and limit_for(k, waveform)}
+    if limit_for("envelope", waveform) and "offset" in out:
+        out["envelope"] = abs(out["offset"]) + out.get("amplitude", 0.0) / 2
+    return out
+
+
+def first_violation(waveform: str, load: str, quantities: dict[str, float]) -> Violation | None:
+    """The first row (in table order) that a value in `quantities` falls outside, for
+    `waveform` into `load`; None when every value is accepted.  A NaN is outside every
+    range.  Quantities without a row for the waveform are not the table's business."""
+    for row in LIMITS:
+        if row.key not in quantities or waveform not in row.waveforms:
+            continue
+        value = quantities[row.key]
+        low, high = row.bounds(load)
+        if not low <= value <= high:
+            return Violation(row, value, load, waveform)
+    return None
+
+
+def _row(key: str, waveform: str) -> Limit:
+    row = limit_for(key, waveform)
+    assert row is not None, (key, waveform)
+    return row
+
+
+# The figures by name, derived from the table (for callers that need one number: campaign
+# file checks, profile synthesis); the table stays the one place they are written.
+FREQUENCY_MIN_HZ = _row("frequency", "SINE").high_z[0]
+FREQUENCY_MAX_HZ = {w: _row("frequency", w).high_z[1] for w in WAVEFORMS if limit_for("frequency", w)}
+AMPLITUDE_MIN_VPP = {load: _row("amplitude", "SINE").bounds(load)[0] for load in LOADS}
+AMPLITUDE_MAX_VPP = {load: _row("amplitude", "SINE").bounds(load)[1] for load in LOADS}
+OFFSET_MAX_V = {load: _row("offset", "DC").bounds(load)[1] for load in LOADS}          # |offset|
+ENVELOPE_MAX_V = {load: _row("envelope", "SINE").bounds(load)[1] for load in LOADS}
+PHASE_MIN_DEG, PHASE_MAX_DEG = _row("phase", "SINE").high_z
+ARB_POINTS_MIN, ARB_POINTS_MAX = (int(b) for b in _row("points", "ARB").high_z)
 
 # --- arbitrary waveforms -----------------------------------------------------------------------
-ARB_POINTS_MAX = 16384          # user waveform length (16 kpts)
-ARB_POINTS_MIN = 2
 ARB_SAMPLE_FORMAT = "<h"        # one sample = 16-bit two's complement, little-endian (VERIFY)
 ARB_CODE_MIN = -8192            # 14-bit values stored in the 16-bit words (VERIFY: the manual
 ARB_CODE_MAX = 8191             # may use offset binary 0..16383; change these three then)

@@ -19,7 +19,8 @@ separated by ';'):
 Errors go to the error queue (SCPI numbers and texts, 20 deep, -350 on overflow) and set
 the standard event status bits (-1xx CME 32, -2xx EXE 16, -3xx DDE 8, -4xx QYE 4); a
 command in error changes nothing (a BSWV's pairs are checked together, then applied).
-Limits and formats come from `groundstation.instruments.spec4050`, like the driver's.
+Limits and formats come from `groundstation.instruments.spec4050`: its limits table is
+the one the driver checks against, so both refuse the same values with the same numbers.
 For tests, `ScpiServer.inject_reply(command, data)` makes the server answer a query with
 raw bytes (a reply that is not text, not a number) or not at all (a hung instrument).
 
@@ -369,19 +370,26 @@ class SimulatedGenerator:
         n_bytes = parse_length(p["LENGTH"])
         if n_bytes != len(data):
             raise ScpiError(-223, f"Too much or too little data; LENGTH {n_bytes}, got {len(data)}")
-        if n_bytes % 2 or not 2 * spec.ARB_POINTS_MIN <= n_bytes <= 2 * spec.ARB_POINTS_MAX:
-            raise ScpiError(-222, f"Data out of range; {n_bytes} bytes is not {spec.ARB_POINTS_MIN}.."
-                                  f"{spec.ARB_POINTS_MAX} 16-bit samples")
+        load = self.channels[int(m.group(1))].load
+        points = spec.first_violation("ARB", load, {"points": n_bytes / 2})
+        if n_bytes % 2 or points is not None:
+            row = spec.limit_for("points", "ARB")
+            raise ScpiError(-222, f"Data out of range; {row.field} {n_bytes}B is "
+                                  f"{n_bytes / 2:g} 16-bit samples "
+                                  f"({row.range_text(load, between='..')})")
         codes = np.frombuffer(data, dtype=np.dtype(spec.ARB_SAMPLE_FORMAT)).astype(np.int16)
         if codes.min() < spec.ARB_CODE_MIN or codes.max() > spec.ARB_CODE_MAX:
             raise ScpiError(-222, f"Data out of range; samples must be {spec.ARB_CODE_MIN}.."
                                   f"{spec.ARB_CODE_MAX}")
         opt = {k: _number(p[k], k) if k in p else None for k in ("FREQ", "AMPL", "OFST", "PHASE")}
-        if opt["FREQ"] is not None and not (spec.FREQUENCY_MIN_HZ <= opt["FREQ"]
-                                            <= spec.FREQUENCY_MAX_HZ["ARB"]):
-            raise ScpiError(-222, f"Data out of range; FREQ {opt['FREQ']:g}")
-        if opt["AMPL"] is not None and not 0 < opt["AMPL"] <= spec.AMPLITUDE_MAX_VPP["HZ"]:
-            raise ScpiError(-222, f"Data out of range; AMPL {opt['AMPL']:g}")
+        # the header's frequency and amplitude are what the waveform plays at: the same
+        # rows as a basic wave's, into the channel's load
+        header_values = {"frequency": opt["FREQ"], "amplitude": opt["AMPL"]}
+        violation = spec.first_violation("ARB", load, {k: v for k, v in header_values.items()
+                                                       if v is not None})
+        if violation is not None:
+            raise _out_of_range(violation, {"frequency": "FREQ", "amplitude": "AMPL"}
+                                [violation.limit.key])
         self.user_waves[name] = UserWave(name, codes.copy(), opt["FREQ"], opt["AMPL"],
                                          opt["OFST"], opt["PHASE"])
         now = self._next_tick()
@@ -446,25 +454,24 @@ def parse_length(text: str) -> int:
     return int(m.group(1)) * (1024 if (m.group(2) or "").upper() == "KB" else 1)
 
 
+def _out_of_range(violation: spec.Violation, field: str | None = None) -> ScpiError:
+    """-222 naming the field as the command calls it (BSWV's name unless `field` says
+    otherwise), its value and the range from the limits table (the driver words the same
+    row for the user)."""
+    row = violation.limit
+    bounds = row.range_text(violation.load, between="..", plus_minus="+-", at_most="max ")
+    where = f" for {violation.waveform}" if spec.varies_by_waveform(row.key) else ""
+    return ScpiError(-222, f"Data out of range; {field or row.field} {violation.value:g} "
+                          f"({bounds}{where})")
+
+
 def _check_levels(c: _Channel) -> None:
     """The instrument's own limits for a channel state (ScpiError -222 naming the value)."""
-    load = c.load
-    if c.waveform != "DC":
-        fmax = spec.FREQUENCY_MAX_HZ[c.waveform]
-        if not (math.isfinite(c.frequency_hz) and spec.FREQUENCY_MIN_HZ <= c.frequency_hz <= fmax):
-            raise ScpiError(-222, f"Data out of range; FRQ {c.frequency_hz:g} "
-                                  f"(max {fmax:g} for {c.waveform})")
-        lo, hi = spec.AMPLITUDE_MIN_VPP[load], spec.AMPLITUDE_MAX_VPP[load]
-        if not lo <= c.amplitude_vpp <= hi:
-            raise ScpiError(-222, f"Data out of range; AMP {c.amplitude_vpp:g} ({lo:g}..{hi:g} Vpp)")
-        if not spec.PHASE_MIN_DEG <= c.phase_deg <= spec.PHASE_MAX_DEG:
-            raise ScpiError(-222, f"Data out of range; PHSE {c.phase_deg:g}")
-    if abs(c.offset_v) > spec.OFFSET_MAX_V[load]:
-        raise ScpiError(-222, f"Data out of range; OFST {c.offset_v:g}")
-    amp = c.amplitude_vpp if c.waveform != "DC" else 0.0
-    if abs(c.offset_v) + amp / 2 > spec.ENVELOPE_MAX_V[load]:
-        raise ScpiError(-222, f"Data out of range; |OFST|+AMP/2 {abs(c.offset_v) + amp / 2:g} V "
-                              f"(max {spec.ENVELOPE_MAX_V[load]:g})")
+    violation = spec.first_violation(c.waveform, c.load, spec.wave_quantities(
+        c.waveform, frequency_hz=c.frequency_hz, amplitude_vpp=c.amplitude_vpp,
+        offset_v=c.offset_v, phase_deg=c.phase_deg))
+    if violation is not None:
+        raise _out_of_range(violation)
 
 
 # ---------------------------------------------------------------------------------- server
