@@ -196,8 +196,8 @@ def check_log(path: str | Path) -> LogCheck:
 def _check_packet(r: LogReader, name: str) -> PacketCheck:
     frames = r.n_frames(name)
     damage: list[DatasetDamage] = []
-    readable = _check_rows(r, f"telemetry/{name}", r._f["telemetry"][name], frames, damage)
-    fg = r._f["frames"].get(name)
+    readable = _check_rows(r, f"telemetry/{name}", r.h5["telemetry"][name], frames, damage)
+    fg = r.h5["frames"].get(name)
     if fg is None:
         damage.append(DatasetDamage(f"/frames/{name}", 0, frames, "missing"))
     else:
@@ -211,7 +211,7 @@ def _check_packet(r: LogReader, name: str) -> PacketCheck:
 
 
 def _check_journal(r: LogReader) -> tuple[tuple[int, int], list[DatasetDamage]]:
-    j = r._f["journal"]
+    j = r.h5["journal"]
     total = min(j["time"].shape[0], j["kind"].shape[0])
     damage: list[DatasetDamage] = []
     readable = _check_rows(r, "journal", j, total, damage)

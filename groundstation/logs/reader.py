@@ -12,148 +12,37 @@ Time ranges `[start, stop]` are inclusive and in seconds of the chosen timebase:
 "device" (`device_time`, the unwrapped device tick / tick rate, monotonic) or "host"
 (`host_time`, the host arrival time since the epoch, monotonic up to clock steps of the
 host).  Tick ranges `[tick_start, tick_stop)` are half-open, like Python slices.
+
+The parts live beside this module, one job each, and are importable from here as
+before: opening and damage detection (opening.py), the row search (rows.py), channel
+descriptions (channels.py) and the summary (summary.py).
 """
 
 from __future__ import annotations
 
 import functools
 import json
-import os
 import tomllib
-from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterable
 
 import h5py
 import numpy as np
 
-from ..codec.sequence import SequenceTracker
-from ..errors import GroundStationError
 from . import schema
+from .channels import HEADER_CHANNELS, Channel, packet_channels
+from .channels import to_engineering as _to_engineering
+# the names below were defined here before the split; callers still import them from here
+from .opening import (H5_READ_ERRORS, EmptyRangeError, LogDamagedError, LogError, LogFormatError,
+                      LogQueryError, check_layout, file_truncation, first_unreadable,
+                      open_log_file, truncation_text, unreadable_text)
+from .opening import attr_text as _text
+from .rows import search_sorted as _search
+from .summary import LogInfo, PacketSummary, scan_sequence, summarize
 
-HEADER_CHANNELS = ("sequence", "tick", "device_time", "host_time")
 TIMEBASES = ("device", "host")
-_SCAN_ROWS = 1 << 20            # rows per read when a whole column must be scanned
-
-
 TIME_TOLERANCE_S = 1e-9
-
-
-class LogError(GroundStationError):
-    """A log cannot be opened or a request to it cannot be answered (message says why)."""
-
-
-class LogFormatError(LogError):
-    """The file is not a ground-station log this version can read (not HDF5, another
-    schema, a newer schema version, or a damaged layout)."""
-
-
-class LogQueryError(LogError):
-    """A request names a packet, channel, timebase or journal kind the log does not have."""
-
-
-class EmptyRangeError(LogQueryError):
-    """A time or tick range holds no frames of the packet."""
-
-
-class LogDamagedError(LogFormatError):
-    """The file is (or was) a log but part of it cannot be read: empty, superblock
-    destroyed, truncated, or a dataset / attribute that HDF5 cannot read any more.
-
-    `what` names the damage; the message adds the file and what to do about it
-    (`groundstation log check`, and `log export --salvage` when something is readable)."""
-
-    def __init__(self, path: str | Path, what: str, *, salvageable: bool = True):
-        self.path = Path(path)
-        self.what = what
-        self.salvageable = salvageable
-        if salvageable:
-            advice = (f"run `groundstation log check {self.path}` to see what is readable, and "
-                      f"`groundstation log export {self.path} --salvage` to export it")
-        else:
-            advice = (f"nothing in it can be read (`groundstation log check {self.path}` "
-                      f"says what was found)")
-        super().__init__(f"{self.path}: damaged log, {what}; {advice}")
-
-
-#: what h5py raises when the bytes under a read are not what HDF5 wrote (a filter fails,
-#: a signature or checksum does not match, an address lies past the end of the file)
-H5_READ_ERRORS = (OSError, RuntimeError)
-#: signatures of HDF5 structures (object header, B-trees, heaps, chunk index) that show
-#: a file without a valid superblock once was an HDF5 file
-_HDF5_SIGNATURES = (b"OHDR", b"TREE", b"GCOL", b"FRHP", b"BTHD", b"EAHD", b"FAHD")
-
-
-def truncation_text(actual: int, expected: int) -> str:
-    return f"truncated: file ends at byte {actual}, HDF5 expects {expected}"
-
-
-def file_truncation(f: h5py.File, path: Path) -> tuple[int, int] | None:
-    """(bytes on disk, bytes HDF5 expects) if the file is shorter than its superblock's
-    end-of-file address says, else None.  HDF5 itself refuses such a file in normal read
-    mode ("truncated file: eof = ..."), but not in the SWMR read mode we use (a writer
-    may be extending it), so we ask: H5Fget_filesize is max(end of allocated space,
-    end of file), larger than the size on disk exactly when the file was cut short."""
-    try:
-        expected = int(f.id.get_filesize())
-        actual = os.stat(path).st_size
-    except (OSError, RuntimeError):
-        return None
-    return (actual, expected) if expected > actual else None
-
-
-def _superblock_eof(path: Path) -> int | None:
-    """End-of-file address from a version 2/3 superblock at offset 0 (the format our
-    logs use), for when HDF5 cannot open the file to say it: signature (8 bytes),
-    version, sizes of offsets and lengths, flags, then base, extension and EOF addresses."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(48)
-    except OSError:
-        return None
-    if len(head) < 12 or head[:8] != b"\x89HDF\r\n\x1a\n" or head[8] not in (2, 3):
-        return None
-    size = head[9]
-    at = 12 + 2 * size
-    if size not in (4, 8) or len(head) < at + size:
-        return None
-    return int.from_bytes(head[at:at + size], "little")
-
-
-def _looks_like_hdf5_body(path: Path, limit: int = 4 << 20) -> bool:
-    try:
-        with open(path, "rb") as fh:
-            body = fh.read(limit)
-    except OSError:
-        return False
-    return any(sig in body for sig in _HDF5_SIGNATURES)
-
-
-def first_unreadable(ds: h5py.Dataset, start: int, stop: int) -> tuple[int, str]:
-    """(k, error) for rows [start, stop) of `ds`: rows start..k-1 read, row k's chunk does
-    not (k == stop and error '' when all read).  Reads many chunks at a time and narrows
-    down to one chunk only where a read fails."""
-    step = ds.chunks[0] if ds.chunks else max(1, stop - start)
-    block = step * 256
-    a = start
-    while a < stop:
-        b = min(stop, a + block)
-        try:
-            ds[a:b]
-        except H5_READ_ERRORS as exc:
-            first_error = str(exc)
-            c = a
-            while c < b:
-                d = min(b, (c // step + 1) * step)
-                try:
-                    ds[c:d]
-                except H5_READ_ERRORS as exc2:
-                    return c, str(exc2)
-                c = d
-            return a, first_error          # only the large read fails: be conservative
-        a = b
-    return stop, ""
 
 
 def _guard(method):
@@ -170,225 +59,11 @@ def _guard(method):
 
 
 @dataclass(frozen=True)
-class Channel:
-    """One column of a packet as recorded."""
-
-    name: str                 # dataset name ("raw/<item>" for wire counts)
-    units: str
-    description: str
-    dtype: np.dtype           # object for text/bytes items
-    kind: str                 # header | eng | flag | raw | text
-    conversion: dict | None = None
-    states: dict[str, int] = field(default_factory=dict)
-    limits: dict | None = None
-    encoding: str = ""        # text items: "utf-8" (str) or "binary" (bytes)
-    has_raw: bool = False     # an eng channel whose wire counts are in raw/<name>
-    from_raw: bool = False    # read() computes it from raw/<name> with `conversion`, in
-                              # float64 exactly as the live decoder does (the stored column
-                              # is a narrower float, kept for h5dump and direct readers)
-
-
-@dataclass(frozen=True)
-class PacketSummary:
-    name: str
-    id: int
-    description: str
-    nominal_rate_hz: float
-    frames: int
-    first_device_time: float | None
-    last_device_time: float | None
-    first_host_time: float | None
-    last_host_time: float | None
-    drops: int                # frames missing according to sequence gaps (mod 2^32)
-    gaps: int                 # number of gaps
-    duplicates: int           # repeated, out-of-order or wild sequence numbers (not believed)
-    rate_hz: float            # frames received per second of device time
-
-    @property
-    def duration_s(self) -> float:
-        if self.first_device_time is None or self.last_device_time is None:
-            return 0.0
-        return self.last_device_time - self.first_device_time
-
-
-@dataclass(frozen=True)
-class LogInfo:
-    path: Path
-    schema_version: int
-    uuid: str
-    test_name: str
-    run: int
-    notes: str
-    created_utc: str
-    created: float            # s since the epoch
-    stop_utc: str             # as recorded, or from the last frame if the log was not closed
-    stop: float
-    clean_close: bool         # False: the recorder crashed (or is still writing)
-    software_version: str
-    host: str
-    user: str
-    protocol_version: str
-    dictionary_hash: str
-    tick_rate_hz: float
-    packets: dict[str, PacketSummary]
-
-    @property
-    def duration_s(self) -> float:
-        return max(0.0, self.stop - self.created)
-
-    @property
-    def frames(self) -> int:
-        return sum(p.frames for p in self.packets.values())
-
-    @property
-    def drops(self) -> int:
-        return sum(p.drops for p in self.packets.values())
-
-    def format(self) -> str:
-        """A few lines for a terminal."""
-        state = "closed cleanly" if self.clean_close else "NOT closed (crash or still recording)"
-        lines = [f"{self.path}",
-                 f"  test '{self.test_name}' run {self.run}, {self.created_utc} .. {self.stop_utc} "
-                 f"({self.duration_s:.1f} s), {state}",
-                 f"  protocol {self.protocol_version} (dictionary {self.dictionary_hash}), "
-                 f"software {self.software_version} on {self.host}"]
-        if self.notes:
-            lines.append(f"  notes: {self.notes}")
-        for p in self.packets.values():
-            span = (f"device t {p.first_device_time:.4f}..{p.last_device_time:.4f} s"
-                    if p.frames else "no frames")
-            lines.append(f"  {p.name:<13} {p.frames:>9} frames  {p.rate_hz:8.2f}/s  "
-                         f"drops {p.drops} in {p.gaps} gap(s)  {span}")
-        return "\n".join(lines)
-
-
-@dataclass(frozen=True)
 class JournalRecord:
     time: float               # host time, s since the epoch
     kind: str
     data: dict[str, Any]
     blob: bytes
-
-
-def _text(value: Any) -> str:
-    if isinstance(value, bytes):
-        return value.decode("utf-8", errors="replace")
-    if isinstance(value, np.ndarray) and value.shape == ():
-        return _text(value[()])
-    return "" if value is None else str(value)
-
-
-def _utc_seconds(text: str) -> float | None:
-    try:
-        return datetime.fromisoformat(text).timestamp()
-    except (TypeError, ValueError):
-        return None
-
-
-def _convertible(conversion: dict | None) -> bool:
-    return isinstance(conversion, dict) and (
-        isinstance(conversion.get("polynomial"), list) or "scale" in conversion)
-
-
-def _to_engineering(raw: np.ndarray, conversion: dict) -> np.ndarray:
-    """Wire counts -> engineering units by the recorded conversion, with the same float64
-    operations as dictionary.Item.to_engineering (so the values equal the live ones)."""
-    if "polynomial" in conversion:
-        return np.polynomial.polynomial.polyval(raw.astype(np.float64),
-                                                [float(c) for c in conversion["polynomial"]])
-    eng = raw.astype(np.float64)
-    eng *= float(conversion["scale"])
-    offset = float(conversion.get("offset", 0.0) or 0.0)
-    if offset:
-        eng += offset
-    return eng
-
-
-def _search(ds: h5py.Dataset, n: int, value: float, side: str) -> int:
-    """First row i of the sorted rows [0, n) with ds[i] >= value ("left") or > value
-    ("right"); n if there is none.  Bisects over chunk starts (one point read each),
-    then searches inside the one chunk that holds the answer."""
-    if n <= 0:
-        return 0
-    step = ds.chunks[0] if ds.chunks else 8192
-    lo, hi = 0, (n - 1) // step + 1
-    while lo < hi:
-        mid = (lo + hi) // 2
-        x = ds[mid * step]
-        if (x < value) if side == "left" else (x <= value):
-            lo = mid + 1
-        else:
-            hi = mid
-    if lo == 0:                       # the first row already qualifies
-        return 0
-    c0 = (lo - 1) * step
-    block = ds[c0:min(n, c0 + step)]
-    return c0 + int(np.searchsorted(block, value, side=side))
-
-
-def _open_h5(path: Path) -> h5py.File:
-    """Open for SWMR reading without an HDF5 file lock: a reader holding the shared lock
-    would make the recorder's final reopen (which marks the log clean_close) fail in the
-    writing process.  If this process already has the file open with locking (a recorder
-    in this process), HDF5 requires the same flag: then open it that way."""
-    try:
-        return h5py.File(path, "r", libver="latest", swmr=True, locking=False)
-    except OSError as exc:
-        if "locking" not in str(exc):
-            raise
-    return h5py.File(path, "r", libver="latest", swmr=True)
-
-
-def open_log_file(path: Path, *, salvage: bool = False) -> tuple[h5py.File, tuple[int, int] | None]:
-    """Open `path` for SWMR reading, or say precisely why it cannot be read: no such
-    file, empty, not HDF5, HDF5 structures without a superblock, unopenable, truncated.
-    Returns the file and (bytes on disk, bytes expected) when it is truncated - which
-    raises LogDamagedError unless `salvage` (then the caller reads what it can)."""
-    if not path.exists():
-        raise LogError(f"{path}: no such file")
-    if not path.is_file():
-        raise LogFormatError(f"{path} is not a file")
-    try:
-        size = path.stat().st_size
-        is_hdf5 = h5py.is_hdf5(str(path))
-    except OSError as exc:
-        raise LogError(f"{path}: cannot read ({exc})") from None
-    if size == 0:
-        raise LogDamagedError(path, "not an HDF5 file: it is empty (0 bytes)", salvageable=False)
-    if not is_hdf5:
-        if _looks_like_hdf5_body(path):
-            raise LogDamagedError(
-                path, "not an HDF5 file any more: the HDF5 superblock at its start is destroyed "
-                      "(HDF5 structures follow it, but no HDF5 reader can find them)",
-                salvageable=False)
-        try:
-            with open(path, "rb") as fh:
-                head = fh.read(16)
-        except OSError:
-            head = b""
-        raise LogFormatError(
-            f"{path} is not an HDF5 file (it starts with {head!r}); a ground-station "
-            f"log is the .h5 file `groundstation record` writes")
-    try:
-        f = _open_h5(path)
-    except H5_READ_ERRORS as exc:
-        expected = _superblock_eof(path)
-        if expected is not None and expected > size:
-            raise LogDamagedError(path, truncation_text(size, expected) + " and what is left "
-                                  f"cannot be opened ({exc})", salvageable=False) from None
-        raise LogDamagedError(path, f"the HDF5 file cannot be opened ({exc})",
-                              salvageable=False) from None
-    cut = file_truncation(f, path)
-    if cut is not None and not salvage:
-        f.close()
-        # a recorder may be between writing the superblock and extending the file at a
-        # flush: a file it is still writing is looked at once more before it is called cut
-        f = _open_h5(path)
-        cut = file_truncation(f, path)
-        if cut is not None:
-            f.close()
-            raise LogDamagedError(path, truncation_text(*cut))
-    return f, cut
 
 
 class LogReader:
@@ -440,8 +115,7 @@ class LogReader:
                 row = int(np.min(sel)) if len(sel) else 0
             else:
                 row = int(sel) if isinstance(sel, (int, np.integer)) else 0
-            where = f"after frame {row}" if row else "from its first frame"
-            raise self._damaged(f"dataset /{path} unreadable {where} (of {n}; {exc})") from None
+            raise self._damaged(unreadable_text(ds, row, exc)) from None
 
     @_guard
     def readable_rows(self, path: str, start: int = 0, stop: int | None = None) -> tuple[int, str]:
@@ -456,30 +130,7 @@ class LogReader:
 
     # ------------------------------------------------------------------ file
     def _check(self) -> int:
-        a = self._f.attrs
-        if "schema" not in a:
-            top = ", ".join(list(self._f.keys())[:10]) or "nothing"
-            raise LogFormatError(f"{self.path} is an HDF5 file but not a ground-station log: no "
-                                 f"'schema' attribute (top level holds: {top})")
-        found = _text(a["schema"])
-        if found != schema.SCHEMA:
-            raise LogFormatError(f"{self.path}: schema '{found}', not a ground-station log "
-                                 f"('{schema.SCHEMA}')")
-        try:
-            version = int(a["schema_version"])
-        except (KeyError, TypeError, ValueError):
-            raise LogFormatError(f"{self.path}: no valid 'schema_version' attribute "
-                                 f"(found {a.get('schema_version')!r})") from None
-        if version > schema.SCHEMA_VERSION:
-            raise LogFormatError(
-                f"{self.path}: log schema_version {version} is newer than this ground station "
-                f"reads (up to {schema.SCHEMA_VERSION}); update the ground station to open it")
-        if version < 1:
-            raise LogFormatError(f"{self.path}: invalid schema_version {version}")
-        missing = [g for g in ("telemetry", "frames", "journal", "protocol") if g not in self._f]
-        if missing:
-            raise LogFormatError(f"{self.path}: damaged log, group(s) {', '.join(missing)} missing")
-        return version
+        return check_layout(self._f, self.path)
 
     def close(self) -> None:
         self._ds.clear()
@@ -502,6 +153,17 @@ class LogReader:
             ds.refresh()
         self._info = None
         self._origin.clear()
+
+    @property
+    def h5(self) -> h5py.File:
+        """The open HDF5 file, for the package's own low-level readers (log check,
+        replay) that walk its structure; read it, never write it."""
+        return self._f
+
+    def dataset(self, path: str) -> h5py.Dataset:
+        """The dataset at `path` (e.g. 'frames/HIGH_RATE/host_time'), opened once and
+        kept, so refresh() brings it up to date; LogFormatError if the log lacks it."""
+        return self._dataset(path)
 
     def _dataset(self, path: str) -> h5py.Dataset:
         ds = self._ds.get(path)
@@ -577,39 +239,7 @@ class LogReader:
         then the raw counts (named raw/<item>)."""
         if packet in self._channels:
             return self._channels[packet]
-        g = self._packet_group(packet)
-        raw_group = g.get("raw")
-        raw_names = set(raw_group.keys()) if isinstance(raw_group, h5py.Group) else set()
-        order = {n: i for i, n in enumerate(self._item_order().get(packet, []))}
-        names = sorted((n for n in g.keys() if n != "raw"),
-                       key=lambda n: (0, HEADER_CHANNELS.index(n), "") if n in HEADER_CHANNELS
-                       else (1, order.get(n, len(order)), n))
-        out: list[Channel] = []
-        for name in names:
-            obj = g[name]
-            a = obj.attrs
-            if isinstance(obj, h5py.Group):
-                encoding = _text(a.get("encoding", "binary"))
-                out.append(Channel(name, "", _text(a.get("description", "")), np.dtype(object),
-                                   "text", encoding=encoding))
-                continue
-            kind = ("header" if name in HEADER_CHANNELS
-                    else "flag" if obj.dtype == np.bool_ else "eng")
-            conversion = json.loads(_text(a["conversion"])) if "conversion" in a else None
-            has_raw = name in raw_names
-            from_raw = (kind == "eng" and has_raw and _convertible(conversion)
-                        and obj.dtype.kind == "f" and obj.dtype.itemsize < 8)
-            out.append(Channel(
-                name, _text(a.get("units", "")), _text(a.get("description", "")),
-                np.dtype(np.float64) if from_raw else obj.dtype, kind, conversion=conversion,
-                states=json.loads(_text(a["states"])) if "states" in a else {},
-                limits=json.loads(_text(a["limits"])) if "limits" in a else None,
-                has_raw=has_raw, from_raw=from_raw))
-        for ch in list(out):
-            if ch.has_raw:
-                ds = raw_group[ch.name]
-                out.append(Channel(f"raw/{ch.name}", _text(ds.attrs.get("units", "counts")),
-                                   _text(ds.attrs.get("description", "")), ds.dtype, "raw"))
+        out = packet_channels(self._packet_group(packet), self._item_order().get(packet, []))
         self._channels[packet] = out
         return out
 
@@ -813,23 +443,7 @@ class LogReader:
 
     # ------------------------------------------------------------------ gaps and summary
     def _scan_sequence(self, packet: str) -> tuple[np.ndarray, np.ndarray, int]:
-        """(row index after each gap, frames missing there, duplicates and outliers) for
-        `packet`, reading the sequence column in bounded pieces.  The rule is the live
-        link's (codec/sequence.py): one wild sequence number is an outlier, not a gap."""
-        n = self.n_frames(packet)
-        tracker = SequenceTracker()
-        idx, missing, odd = [], [], 0
-        for a in range(0, n, _SCAN_ROWS):
-            seq = self._read(f"telemetry/{packet}/sequence", slice(a, min(n, a + _SCAN_ROWS)))
-            rep = tracker.feed(seq)
-            idx.append(rep.gap_index)
-            missing.append(rep.missing)
-            odd += rep.duplicates + rep.outliers
-        end = tracker.finish()
-        idx.append(end.gap_index)
-        missing.append(end.missing)
-        odd += end.outliers
-        return np.concatenate(idx), np.concatenate(missing), odd
+        return scan_sequence(self, packet)
 
     @_guard
     def gaps(self, packet: str) -> dict[str, np.ndarray]:
@@ -848,52 +462,7 @@ class LogReader:
     @_guard
     def summary(self) -> LogInfo:
         """Root attributes and per-packet statistics (reads each sequence column once)."""
-        a = self.attrs
-        packets: dict[str, PacketSummary] = {}
-        for name in self.packets():
-            g = self._f["telemetry"][name]
-            n = self.n_frames(name)
-            base = f"telemetry/{name}"
-            if n:
-                dev = self._dataset(f"{base}/device_time")
-                host = self._dataset(f"{base}/host_time")
-                ends = [0, n - 1] if n > 1 else [0]
-                dev, host = self._read(f"{base}/device_time", ends), self._read(f"{base}/host_time", ends)
-                fd, ld, fh, lh = float(dev[0]), float(dev[-1]), float(host[0]), float(host[-1])
-            else:
-                fd = ld = fh = lh = None
-            idx, missing, dups = self._scan_sequence(name)
-            span = (ld - fd) if n > 1 else 0.0
-            packets[name] = PacketSummary(
-                name=name, id=int(g.attrs.get("id", 0)), description=_text(g.attrs.get("description", "")),
-                nominal_rate_hz=float(g.attrs.get("rate_hz", 0.0)), frames=n,
-                first_device_time=fd, last_device_time=ld, first_host_time=fh, last_host_time=lh,
-                drops=int(missing.sum()), gaps=len(idx), duplicates=dups,
-                rate_hz=(n - 1) / span if span > 0 else 0.0)
-        created_utc = _text(a.get("created_utc", ""))
-        created = _utc_seconds(created_utc)
-        clean = bool(a.get("clean_close", False))
-        stop_utc = _text(a.get("stop_utc", "")) if clean else ""
-        stop = _utc_seconds(stop_utc) if stop_utc else None
-        if stop is None:      # not closed: the last frame (or journal record) says when it ended
-            lasts = [p.last_host_time for p in packets.values() if p.last_host_time is not None]
-            if not lasts:
-                jt = self._dataset("journal/time")
-                lasts = [float(jt[jt.shape[0] - 1])] if jt.shape[0] else []
-            stop = max(lasts) if lasts else (created or 0.0)
-            stop_utc = datetime.fromtimestamp(stop, timezone.utc).isoformat()
-        if created is None:
-            firsts = [p.first_host_time for p in packets.values() if p.first_host_time is not None]
-            created = min(firsts) if firsts else stop
-        return LogInfo(
-            path=self.path, schema_version=self.schema_version, uuid=_text(a.get("uuid", "")),
-            test_name=_text(a.get("test_name", "")), run=int(a.get("run", 0)),
-            notes=_text(a.get("notes", "")), created_utc=created_utc, created=created,
-            stop_utc=stop_utc, stop=stop, clean_close=clean,
-            software_version=_text(a.get("software_version", "")), host=_text(a.get("host", "")),
-            user=_text(a.get("user", "")), protocol_version=_text(a.get("protocol_version", "")),
-            dictionary_hash=_text(a.get("dictionary_hash", "")),
-            tick_rate_hz=float(a.get("tick_rate_hz", 1200.0)), packets=packets)
+        return summarize(self)
 
     @property
     def info(self) -> LogInfo:
@@ -953,3 +522,9 @@ class LogReader:
             return "", "", ""
         text = _text(tb["config"][()]) if "config" in tb else ""
         return _text(tb.attrs.get("name", "")), _text(tb.attrs.get("path", "")), text
+
+
+__all__ = ["Channel", "EmptyRangeError", "H5_READ_ERRORS", "HEADER_CHANNELS", "JournalRecord",
+           "LogDamagedError", "LogError", "LogFormatError", "LogInfo", "LogQueryError", "LogReader",
+           "PacketSummary", "TIMEBASES", "TIME_TOLERANCE_S", "file_truncation", "first_unreadable",
+           "open_log_file", "truncation_text"]
