@@ -119,18 +119,13 @@ def _cmd_monitor(args) -> int:
             t_end = time.monotonic() + args.duration if args.duration else None
             reported: set[int] = set()
             while not stop.event.wait(args.interval):
-                if client.link_state == "ended":
-                    print(f"error: {client.link_error}", flush=True)
-                    return 3
-                if client.link_state != "up":
-                    print(f"link {client.link_state}: {client.link_error}", flush=True)
-                    if args.no_reconnect:
-                        return 1
-                    client = keeper.reopen(stop.event)
-                    if client is None:
-                        break
-                    reported.clear()
-                    continue
+                ending = keeper.keep_up(stop.event, reconnect=not args.no_reconnect,
+                                        on_event=lambda *_: reported.clear())
+                if ending is not None:
+                    if ending.status != 0:
+                        return ending.status
+                    break
+                client = keeper.client
                 print(format_snapshot(client.stats.snapshot()), flush=True)
                 for err in client.stats.recent_errors():
                     if id(err) not in reported:

@@ -9,8 +9,6 @@ from .dictionary import load_dictionary
 from .errors import GroundStationError
 
 
-#: exit statuses of `record` (and `monitor`), as the --help epilog documents them
-EXIT_OK, EXIT_FAILED, EXIT_REFUSED, EXIT_TAKEN_OVER = 0, 1, 2, 3
 RECORD_EPILOG = """exit status: 0 the recording ended as asked (--duration, Ctrl-C or SIGTERM: the
 log is closed with the reason); 1 the recording failed (disk full ...) or the link was
 lost with --no-reconnect; 2 nothing could start (bad input, connection refused: the log,
@@ -21,8 +19,8 @@ link is reopened with back-off (1, 2, 4, 8, then every 10 s); the log records th
 
 def _cmd_record(args) -> int:
     from .link import format_snapshot
-    from .station.keeper import LinkKeeper
     from .logs import Recorder
+    from .station.keeper import EXIT_REFUSED, LinkKeeper
     from .logs.live import attach_recorder
     from .plant.testbed import load_testbed
     from .stop_request import StopRequest
@@ -65,26 +63,20 @@ def _cmd_record(args) -> int:
 def _record_loop(args, rec, keeper, client, stop, failures, format_snapshot) -> tuple[int, str]:
     """Print the status once a second until the recording should end; returns the exit
     status and the reason the log is closed with."""
+    from .station.keeper import EXIT_FAILED, EXIT_OK
+
+    def journal(state: str, message: str) -> None:
+        rec.record("event", {"source": "link", "state": state, "message": message})
+
     t_end = time.monotonic() + args.duration if args.duration else None
     while True:
         if failures:
             print(f"error: {failures[0]}", flush=True)
             return EXIT_FAILED, failures[0]
-        if client.link_state == "ended":       # another station took the session over
-            print(f"error: {client.link_error}", flush=True)
-            return EXIT_TAKEN_OVER, client.link_error
-        if client.link_state != "up":
-            lost = f"link {client.link_state}: {client.link_error}"
-            print(lost, flush=True)
-            if args.no_reconnect:
-                return EXIT_FAILED, lost
-            rec.record("event", {"source": "link", "state": "reconnecting", "message": lost})
-            client = keeper.reopen(stop.event)
-            if client is None:
-                return EXIT_OK, stop.reason
-            rec.record("event", {"source": "link", "state": "reconnected",
-                                 "message": f"reconnected to {keeper.address}"})
-            continue
+        ending = keeper.keep_up(stop.event, reconnect=not args.no_reconnect, on_event=journal)
+        if ending is not None:
+            return ending.status, ending.reason or stop.reason
+        client = keeper.client
         if stop.event.is_set():
             return EXIT_OK, stop.reason
         if t_end is not None and time.monotonic() >= t_end:

@@ -26,6 +26,17 @@ from groundstation.sim import SimulatedDevice
 from conftest import collect, frames_of, wait_for
 
 
+def recording_session(client, dictionary, tmp_path):
+    """A recording attached to the client, then the session opened (as `record` does):
+    (recorder, detach, the blocks the client hands on)."""
+    rec = Recorder(dictionary, tmp_path, flush_interval_s=0.05)
+    rec.start()
+    detach = attach_recorder(client, rec)
+    blocks = collect(client)
+    client.connect()
+    return rec, detach, blocks
+
+
 def high_rate_frame(dictionary, sequence: int, tick: int) -> bytes:
     codec = FrameCodec(dictionary)
     pkt = dictionary.packet("HIGH_RATE")
@@ -57,11 +68,7 @@ def test_telemetry_from_another_sender_is_counted_and_never_decoded(client, devi
 def test_a_command_frame_on_the_telemetry_port_is_dropped_and_the_recording_goes_on(
         client, device, dictionary, tmp_path):
     """The stray COMMAND frame used to reach the log writer and stop the recording."""
-    rec = Recorder(dictionary, tmp_path, flush_interval_s=0.05)
-    rec.start()
-    detach = attach_recorder(client, rec)
-    blocks = collect(client)
-    client.connect()
+    rec, detach, blocks = recording_session(client, dictionary, tmp_path)
     codec = FrameCodec(dictionary)
     stray = codec.frame(dictionary.packet("COMMAND").id,
                         (0).to_bytes(4, "big") + (4).to_bytes(2, "big"), 7, 0)
@@ -152,11 +159,7 @@ def test_one_wild_sequence_number_from_the_device_is_not_a_billion_drops(
     the live statistics and `log info` count it as an outlier, not as 1.1e9 drops."""
     from groundstation.cli import main
 
-    rec = Recorder(dictionary, tmp_path, flush_interval_s=0.05)
-    rec.start()
-    detach = attach_recorder(client, rec)
-    blocks = collect(client)
-    client.connect()
+    rec, detach, blocks = recording_session(client, dictionary, tmp_path)
     codec = FrameCodec(dictionary)
     hr = dictionary.packet("HIGH_RATE").id
     count = {"n": 0}

@@ -216,6 +216,10 @@ class SetCurrents(Action):
 
 # ------------------------------------------------------------------------- the generator
 _MODEL = f"{spec4050.MODEL} limit, groundstation/instruments/spec4050.py"
+_LOAD = "HZ"                      # the base stage's amplifier input: high impedance
+#: the table's quantity -> the campaign step's key for it
+_WAVE_ARGS = {"frequency": "frequency_hz", "phase": "phase_deg", "amplitude": "amplitude_vpp",
+              "offset": "offset_v"}
 
 
 @register
@@ -233,21 +237,24 @@ class GeneratorSet(Action):
             c.bad("waveform", f"not a waveform the generator driver sets ({', '.join(spec4050.WAVEFORMS)})")
             return
         wave = wave.upper()
-        needed = spec4050.WAVE_PARAMETERS[wave]
-        if "FRQ" in needed:
-            c.number("frequency_hz", lo=spec4050.FREQUENCY_MIN_HZ, hi=spec4050.FREQUENCY_MAX_HZ[wave],
-                     what=f"{_MODEL}, {wave}")
-        if "PHSE" in needed:
-            c.number("phase_deg", lo=spec4050.PHASE_MIN_DEG, hi=spec4050.PHASE_MAX_DEG, what=_MODEL)
-        # the stage's amplifier input is high impedance: the load the driver expects
-        amp = c.number("amplitude_vpp", lo=spec4050.AMPLITUDE_MIN_VPP["HZ"],
-                       hi=spec4050.AMPLITUDE_MAX_VPP["HZ"], what=f"{_MODEL}, high-impedance load") \
-            if "AMP" in needed else None
-        omax = spec4050.OFFSET_MAX_V["HZ"]
-        ofst = c.number("offset_v", lo=-omax, hi=omax, what=f"{_MODEL}, high-impedance load")
-        if amp is not None and ofst is not None and abs(ofst) + amp / 2 > spec4050.ENVELOPE_MAX_V["HZ"]:
+        # the instrument's own limits come from its one table (spec4050.LIMITS), the
+        # same rows the driver and the simulated instrument check; the stage's amplifier
+        # input is high impedance, the load the driver expects
+        values: dict[str, float | None] = {}
+        for key, arg in _WAVE_ARGS.items():
+            row = spec4050.limit_for(key, wave)
+            if row is None:                       # the setting does not apply to this wave
+                continue
+            low, high = row.bounds(_LOAD)
+            where = f", {wave}" if spec4050.varies_by_waveform(key) else ""
+            where += ", high-impedance load" if row.depends_on_load else ""
+            values[key] = c.number(arg, lo=low, hi=high, what=f"{_MODEL}{where}")
+        amp, ofst = values.get("amplitude"), values.get("offset")
+        envelope = spec4050.limit_for("envelope", wave)
+        if envelope is not None and amp is not None and ofst is not None \
+                and abs(ofst) + amp / 2 > envelope.bounds(_LOAD)[1]:
             c.bad("amplitude_vpp", f"|offset| + amplitude/2 = {abs(ofst) + amp / 2:g} V is beyond "
-                                   f"{spec4050.ENVELOPE_MAX_V['HZ']:g} V ({_MODEL})")
+                                   f"{envelope.bounds(_LOAD)[1]:g} V ({_MODEL})")
         tb = c.testbed
         if tb is None:
             return
@@ -320,9 +327,9 @@ class PlayBaseMotion(Action):
             c.problem(f"psd: {profile}")
             return
         vpp = profile.amplitude_vpp
-        if vpp > spec4050.AMPLITUDE_MAX_VPP["HZ"]:
+        if vpp > spec4050.AMPLITUDE_MAX_VPP[_LOAD]:
             c.problem(f"psd: the profile needs {vpp:.3g} Vpp, above the generator's "
-                      f"{spec4050.AMPLITUDE_MAX_VPP['HZ']:g} Vpp ({_MODEL})")
+                      f"{spec4050.AMPLITUDE_MAX_VPP[_LOAD]:g} Vpp ({_MODEL})")
         lim = tb.limits.get("fg_max_amplitude")
         if lim is not None and vpp > lim:
             c.problem(f"psd: the profile needs {vpp:.3g} Vpp, above the testbed's limit "

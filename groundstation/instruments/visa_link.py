@@ -235,10 +235,7 @@ class VisaLink:
             if self.closed:
                 return
             self.closed = True
-            try:
-                atexit.unregister(self.shutdown)
-            except Exception:
-                pass
+            atexit.unregister(self.shutdown)        # never raises, registered or not
             if self.is_generator:
                 try:
                     if self.inst is not None:

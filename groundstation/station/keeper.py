@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import threading
+from dataclasses import dataclass
 from typing import Callable
 
 from ..dictionary import Dictionary
@@ -20,6 +21,17 @@ log = logging.getLogger(__name__)
 
 #: seconds between reconnect attempts: quick at first, then every 10 s
 RECONNECT_DELAYS_S = (1.0, 2.0, 4.0, 8.0, 10.0)
+
+#: how a command-line session ends (its exit status): as asked, failed (recording failed
+#: or link lost without reconnecting), could not start, taken over by another station
+EXIT_OK, EXIT_FAILED, EXIT_REFUSED, EXIT_TAKEN_OVER = 0, 1, 2, 3
+
+
+@dataclass(frozen=True)
+class Ending:
+    """Why a kept link's session is over: the exit status and the reason to report."""
+    status: int
+    reason: str
 
 
 class LinkKeeper:
@@ -86,6 +98,33 @@ class LinkKeeper:
             self.reconnects += 1
             self.say(f"reconnected to {self.address}")
             return client
+        return None
+
+    def keep_up(self, stop: threading.Event, *, reconnect: bool = True,
+                on_event: Callable[[str, str], None] | None = None) -> Ending | None:
+        """One check of the link, the policy `record` and `monitor` share: None while
+        the session goes on (after a reconnect if the link was lost: `self.client` is
+        the new client), else the Ending.  A session taken over is never reconnected;
+        a lost link is reopened with back-off unless `reconnect` is off.  on_event(state,
+        message) hears "reconnecting" and "reconnected" (a recording journals them)."""
+        client = self.client
+        if client is None:
+            return Ending(EXIT_FAILED, "no link")
+        if client.link_state == "up":
+            return None
+        if client.link_state == "ended":             # another station took the session over
+            self.say(f"error: {client.link_error}")
+            return Ending(EXIT_TAKEN_OVER, client.link_error)
+        lost = f"link {client.link_state}: {client.link_error}"
+        self.say(lost)
+        if not reconnect:
+            return Ending(EXIT_FAILED, lost)
+        if on_event is not None:
+            on_event("reconnecting", lost)
+        if self.reopen(stop) is None:                # stopped while waiting to reconnect
+            return Ending(EXIT_OK, "")
+        if on_event is not None:
+            on_event("reconnected", f"reconnected to {self.address}")
         return None
 
     def _close_client(self) -> None:
