@@ -19,7 +19,7 @@ from groundstation.params.upload import ParameterLoader
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import Firmware
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
-from groundstation.stream import TelemetryStore
+from groundstation.display_buffers import TelemetryStore
 
 CONTROLLERS = Path(__file__).resolve().parent.parent / "profiles" / "controllers"
 RATE = 1200

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from groundstation.cli import main
-from groundstation.profiles import generators as g
+from groundstation.profiles import waveforms as g
 from groundstation.profiles.profile import (WAVEFORMS_DIR, Profile, ProfileFileError, ProfileRefused,
                                             check_profile, load_profile, preview, profile_from_dict,
                                             summarise)

@@ -36,7 +36,7 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QHBoxLayout, QLabel, QMenu,
                                QSplitter, QVBoxLayout, QWidget)
 
 from ..dictionary import Dictionary
-from ..stream import TelemetryStore, peak_decimate, with_gap_breaks
+from ..display_buffers import TelemetryStore, peak_decimate, with_gap_breaks
 from .chart_plot import ChartPlot
 from .channel_tree import (ChannelInfo, DisplayUnit, channel_catalog,
                            display_unit, format_value)

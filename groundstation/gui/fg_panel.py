@@ -30,7 +30,7 @@ from ..basemotion import BaseMotionProfile, preview_spectrum
 from ..errors import GroundStationError
 from ..instruments import spec4050 as spec
 from ..plant.testbed import PROFILES_DIR
-from .generator import (DEFAULT_TOLERANCE, SIMULATOR, CheckResult, GeneratorState,
+from .fg_controller import (DEFAULT_TOLERANCE, SIMULATOR, CheckResult, GeneratorState,
                         ResourceChoice, UploadedProfile, limit_texts, limits_source)
 from .session import Session
 

@@ -17,7 +17,7 @@ from PySide6.QtWidgets import (QAbstractScrollArea, QCheckBox, QComboBox, QFormL
                                QTableWidgetItem, QVBoxLayout, QWidget)
 
 from ..link import format_snapshot
-from ..monitor import GREEN, RED, YELLOW
+from ..limits import GREEN, RED, YELLOW
 from .session import Session
 
 LAMP = {"up": "#2e7d32", "connecting": "#f9a825", "lost": "#c62828", "failed": "#c62828",

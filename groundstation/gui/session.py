@@ -23,13 +23,13 @@ from ..errors import GroundStationError
 from ..link import DeviceClient, open_client
 from ..logs import Recorder, ReplaySource
 from ..logs.live import attach_recorder
-from ..monitor import LimitMonitor
+from ..limits import LimitMonitor
 from ..params.upload import ParameterHistory, ParameterLoader
 from ..profiles import Profile, ProfilePlayer
 from ..sim.process import SimulatorProcess
-from ..stream import TelemetryStore
+from ..display_buffers import TelemetryStore
 from .campaign_runner import CampaignController
-from .generator import GeneratorController
+from .fg_controller import GeneratorController
 
 log = logging.getLogger(__name__)
 

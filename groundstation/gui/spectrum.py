@@ -20,7 +20,7 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidg
 from scipy import signal
 
 from ..dictionary import Dictionary
-from ..stream import TelemetryStore
+from ..display_buffers import TelemetryStore
 from .channel_tree import channel_catalog, display_unit, format_value
 
 SECONDS_CHOICES = (1, 2, 5, 10, 30, 60)

@@ -1,4 +1,4 @@
-"""Command profiles: waveform generators (generators.py), profile files and their checks
+"""Command profiles: waveform generators (waveforms.py), profile files and their checks
 (profile.py), upload and playback on the device (upload.py).  See profiles/waveforms/."""
 
 from .profile import (TARGETS, Profile, ProfileCheck, ProfileError, ProfileFileError,

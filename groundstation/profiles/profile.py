@@ -40,7 +40,7 @@ from scipy import signal
 from ..dictionary import Dictionary
 from ..errors import GroundStationError
 from ..tomlfile import read_toml
-from . import generators as gen
+from . import waveforms as gen
 
 RATE_HZ = gen.RATE_HZ
 WAVEFORMS_DIR = Path(__file__).resolve().parent.parent.parent / "profiles" / "waveforms"
