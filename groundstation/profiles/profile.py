@@ -23,128 +23,35 @@ rates <angle>_per_s; currents a, ma; their slopes <unit>_per_s (<angle>_per_s2 f
 reference).  Times end in _s, frequencies in _hz.
 
 The samples are float32 (what the device receives).  Errors name the file and the field.
+
+This module reads profile files; the Profile itself and its targets are in samples.py, the
+device's checks in checks.py, previews and summaries in summary.py.  Every name is also
+importable from here.
 """
 
 from __future__ import annotations
 
 import csv
 import math
-import zlib
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
-from scipy import signal
 
 from ..dictionary import Dictionary
-from ..errors import GroundStationError
 from ..tomlfile import read_toml
 from . import waveforms as gen
+from .checks import ProfileCheck, check_profile, sample_range
+from .samples import (_CSV_UNITS, DEFAULT_GYRO_RANGE, RATE_HZ, TARGETS, Profile, ProfileError,
+                      ProfileFileError, ProfileRefused, TargetInfo)
+from .summary import ProfileSummary, preview, summarise, write_csv
 
-RATE_HZ = gen.RATE_HZ
+__all__ = ["DEFAULT_GYRO_RANGE", "RATE_HZ", "TARGETS", "WAVEFORMS_DIR", "Profile", "ProfileCheck",
+           "ProfileError", "ProfileFileError", "ProfileRefused", "ProfileSummary", "TargetInfo",
+           "check_profile", "load_profile", "preview", "profile_from_dict", "sample_range",
+           "summarise", "write_csv"]
+
 WAVEFORMS_DIR = Path(__file__).resolve().parent.parent.parent / "profiles" / "waveforms"
-
-#: the rigs' gyro full scale (SPEC §11.2): the bound of a RATE_REFERENCE sample when no
-#: testbed file says otherwise
-DEFAULT_GYRO_RANGE = math.radians(1000.0)
-
-
-class ProfileError(GroundStationError):
-    """A profile cannot be used (the message says which file and field, and what to do)."""
-
-
-class ProfileFileError(ProfileError):
-    """A profile file cannot be read, is malformed, or describes no valid waveform."""
-
-
-class ProfileRefused(ProfileError):
-    """A readable profile that must not be sent (out of the target's range, too long, ...)."""
-
-
-# ----------------------------------------------------------------------------- units
-_ANGLE = {"rad": 1.0, "mrad": 1e-3, "urad": 1e-6, "deg": math.pi / 180, "arcsec": math.pi / 648000}
-_RATE = {f"{u}_per_s": f for u, f in _ANGLE.items()}
-_ACCEL = {f"{u}_per_s2": f for u, f in _ANGLE.items()}
-_CURRENT = {"a": 1.0, "ma": 1e-3}
-_CURRENT_SLOPE = {f"{u}_per_s": f for u, f in _CURRENT.items()}
-
-
-@dataclass(frozen=True)
-class TargetInfo:
-    name: str
-    units: str                         # the wire units of the samples
-    quantity: str                      # "angle", "rate", "current"
-    value_units: dict[str, float]      # key suffix -> factor to `units`
-    slope_units: dict[str, float]      # key suffix -> factor to `units`/s
-    modes: tuple[str, ...]             # modes that play it (SPEC §11.2)
-
-
-TARGETS: dict[str, TargetInfo] = {
-    "REFERENCE": TargetInfo("REFERENCE", "rad", "angle", _ANGLE, _RATE, ("RELATIVE", "INERTIAL")),
-    "RATE_REFERENCE": TargetInfo("RATE_REFERENCE", "rad/s", "rate", _RATE, _ACCEL, ("INERTIAL",)),
-    "CURRENT_COARSE": TargetInfo("CURRENT_COARSE", "A", "current", _CURRENT, _CURRENT_SLOPE, ("OPEN_LOOP",)),
-    "CURRENT_FINE": TargetInfo("CURRENT_FINE", "A", "current", _CURRENT, _CURRENT_SLOPE, ("OPEN_LOOP",)),
-}
-
-#: the unit names a CSV column may be given in (value_units), by quantity
-_CSV_UNITS = {"angle": _ANGLE, "rate": _RATE, "current": _CURRENT}
-
-
-# ----------------------------------------------------------------------------- the profile
-@dataclass
-class Profile:
-    """Samples for one target, played one per control period."""
-
-    name: str
-    target: str                        # a key of TARGETS
-    units: str                         # the target's units
-    samples: np.ndarray                # float32: exactly what is sent (before any origin offset)
-    rate: float = RATE_HZ
-    description: str = ""
-    source: str = ""                   # the file it came from, or what made it
-    #: "relative": REFERENCE samples are offsets from the position held when it is loaded
-    #: (the loader adds it); "absolute": sent as they are
-    origin: str = "absolute"
-    generator: dict[str, Any] = field(default_factory=dict)   # the [generator] table, for the log
-
-    def __post_init__(self) -> None:
-        if self.target not in TARGETS:
-            raise ProfileError(f"profile {self.name!r}: unknown target {self.target!r} "
-                               f"(known: {', '.join(TARGETS)})")
-        if self.origin not in ("absolute", "relative"):
-            raise ProfileError(f"profile {self.name!r}: origin must be 'absolute' or 'relative'")
-        self.samples = np.ascontiguousarray(self.samples, dtype=np.float32)
-        if self.samples.ndim != 1:
-            raise ProfileError(f"profile {self.name!r}: samples must be one-dimensional")
-
-    @property
-    def sample_count(self) -> int:
-        return int(self.samples.size)
-
-    @property
-    def duration(self) -> float:
-        """Playing time in seconds (sample_count / rate)."""
-        return self.sample_count / self.rate
-
-    @property
-    def info(self) -> TargetInfo:
-        return TARGETS[self.target]
-
-    def wire_samples(self, offset: float = 0.0) -> np.ndarray:
-        """The float32 samples as the device will play them: + offset for a relative profile
-        (added in double precision, then rounded once to f32)."""
-        if self.origin == "relative" and offset:
-            return (self.samples.astype(np.float64) + offset).astype(np.float32)
-        return self.samples
-
-    def wire_bytes(self, offset: float = 0.0) -> bytes:
-        """Big-endian f32 sample bytes, in index order (what PROFILE_WRITE carries)."""
-        return self.wire_samples(offset).astype(">f4").tobytes()
-
-    def crc(self, offset: float = 0.0) -> int:
-        """CRC-32 of all sample bytes (PROFILE_COMMIT's profile_crc)."""
-        return zlib.crc32(self.wire_bytes(offset))
 
 
 # ----------------------------------------------------------------------------- file format
@@ -438,180 +345,3 @@ def load_profile(path: str | Path, dictionary: Dictionary | None = None, *,
     if validate:
         check_profile(profile, dictionary, gyro_range=gyro_range).raise_if_refused()
     return profile
-
-
-# ----------------------------------------------------------------------------- validation
-@dataclass
-class ProfileCheck:
-    """What validation found: problems refuse the profile, warnings do not."""
-
-    profile: Profile
-    problems: list[str] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-
-    @property
-    def ok(self) -> bool:
-        return not self.problems
-
-    def raise_if_refused(self) -> None:
-        if self.problems:
-            where = self.profile.source or self.profile.name
-            raise ProfileRefused(f"{where}: refused, nothing was sent: " + "; ".join(self.problems))
-
-
-def sample_range(dictionary: Dictionary, target: str,
-                 gyro_range: float = DEFAULT_GYRO_RANGE) -> tuple[float, float]:
-    """The allowed sample range of a target (SPEC §11.2): that of the command argument the
-    samples stand in for, or ± the gyro's full scale for a rate reference."""
-    if target == "REFERENCE":
-        item = dictionary.command("SET_REFERENCE").args[0]
-    elif target in ("CURRENT_COARSE", "CURRENT_FINE"):
-        args = {a.name: a for a in dictionary.command("SET_CURRENTS").args}
-        item = args["current_coarse" if target == "CURRENT_COARSE" else "current_fine"]
-    else:
-        return -gyro_range, gyro_range
-    assert item.value_range is not None
-    return item.value_range
-
-
-def _in_range(dictionary: Dictionary, target: str, x: np.ndarray, gyro_range: float) -> bool:
-    if target == "REFERENCE":
-        item = dictionary.command("SET_REFERENCE").args[0]
-    elif target in ("CURRENT_COARSE", "CURRENT_FINE"):
-        item = dictionary.command("SET_CURRENTS").args[0 if target == "CURRENT_COARSE" else 1]
-    else:
-        return bool(np.all(np.abs(x.astype(np.float64)) <= gyro_range))
-    # as the device compares: f32 sample against the bounds rounded to f32 (Item.in_range)
-    return item.in_range(float(x.min())) and item.in_range(float(x.max()))
-
-
-def check_profile(profile: Profile, dictionary: Dictionary | None = None, *, offset: float = 0.0,
-                  gyro_range: float = DEFAULT_GYRO_RANGE) -> ProfileCheck:
-    """Everything the device would refuse, found here first; `offset` is the position a
-    relative profile will be added to (0 before it is known)."""
-    if dictionary is None:
-        from ..dictionary import load_dictionary
-        dictionary = load_dictionary()
-    check = ProfileCheck(profile)
-    p = check.problems
-    x = profile.wire_samples(offset)
-    count_item = next(a for a in dictionary.command("PROFILE_BEGIN").args if a.name == "sample_count")
-    lo_n, hi_n = count_item.value_range or (1, 2**32 - 1)
-    if not lo_n <= x.size <= hi_n:
-        p.append(f"{x.size} samples ({x.size / profile.rate:g} s) is outside PROFILE_BEGIN's "
-                 f"sample_count range {int(lo_n)} … {int(hi_n)} ({hi_n / profile.rate:g} s)")
-    if profile.rate != dictionary.control_rate_hz:
-        p.append(f"sampled at {profile.rate:g} Hz, but the device plays at "
-                 f"{dictionary.control_rate_hz:g} Hz")
-    if x.size == 0:
-        return check
-    finite = np.isfinite(x)
-    if not finite.all():
-        p.append(f"sample {int(np.flatnonzero(~finite)[0])} is not a finite number")
-        return check
-    lo, hi = sample_range(dictionary, profile.target, gyro_range)
-    if not _in_range(dictionary, profile.target, x, gyro_range):
-        at = "" if profile.origin == "absolute" or not offset else f" (offset {offset:.6g} {profile.units})"
-        p.append(f"samples span {float(x.min()):.6g} … {float(x.max()):.6g} {profile.units}{at}, "
-                 f"outside the {profile.target} range {lo:g} … {hi:g} {profile.units}")
-    rest = np.float32(offset) if profile.origin == "relative" else np.float32(0.0)
-    if x[0] != rest:
-        p.append(f"the first sample is {float(x[0]):.6g} {profile.units}, not the rest value "
-                 f"{float(rest):g}: the device would jump to it - add a ramp in (ramp_s) or start "
-                 f"the data at rest")
-    if profile.target == "REFERENCE":
-        travel = next((q.default for q in dictionary.parameters if q.name == "travel_limit"), None)
-        if travel is not None and float(np.abs(x).max()) > float(travel):
-            check.warnings.append(f"the reference reaches {float(np.abs(x).max()):.4g} rad, beyond "
-                                  f"the default travel_limit {float(travel):g} rad: the device "
-                                  f"faults (OVER_TRAVEL) if the axis gets there")
-        # samples are absolute float32 angles: away from zero they resolve less than the
-        # per-sample steps of a slow motion (at 0.3 rad: 30 nrad, 20 encoder counts)
-        step = np.abs(np.diff(profile.samples.astype(np.float64)))
-        step = step[step > 0]
-        if step.size:
-            ulp = float(np.spacing(np.float32(np.abs(x.astype(np.float64)).max())))
-            typical = float(np.median(step))
-            if ulp > 0.5 * typical:
-                check.warnings.append(
-                    f"at {float(np.abs(x.astype(np.float64)).max()):.4g} rad a float32 sample "
-                    f"resolves {ulp:.3g} rad, coarse against the profile's typical step of "
-                    f"{typical:.3g} rad per sample: the reference moves in stairs (start nearer "
-                    f"the encoder zero)")
-    elif x[-1] != 0 and profile.target.startswith("CURRENT"):
-        check.warnings.append(f"the profile ends at {float(x[-1]):.4g} A: the device holds it "
-                              f"until disarmed")
-    return check
-
-
-# ----------------------------------------------------------------------------- preview
-def preview(profile: Profile, nperseg: int = 16384) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(t [s], samples [units], freqs [Hz], psd [units²/Hz]) for a plot: the time series
-    as played and its one-sided power spectral density (Welch, Hann windows of up to
-    `nperseg` samples, half overlap, no detrending, so a motion's low-frequency content
-    shows).  Integrating psd over freqs gives the mean square of the samples."""
-    x = profile.samples.astype(np.float64)
-    t = np.arange(x.size) / profile.rate
-    if x.size < 2:
-        return t, x, np.zeros(1), np.zeros(1)
-    freqs, psd = signal.welch(x, fs=profile.rate, window="hann", nperseg=min(nperseg, x.size),
-                              detrend=False, scaling="density")
-    return t, x, freqs, psd
-
-
-@dataclass(frozen=True)
-class ProfileSummary:
-    name: str
-    target: str
-    units: str
-    origin: str
-    sample_count: int
-    duration_s: float
-    minimum: float
-    maximum: float
-    rms: float
-    max_slope: float                 # units/s: largest |sample-to-sample change| x rate
-    max_accel: float                 # units/s²
-    peak_frequency_hz: float         # strongest PSD bin above DC
-    crc: int
-
-    def lines(self) -> list[str]:
-        u = self.units
-        return [
-            f"profile:  {self.name}",
-            f"target:   {self.target} ({u}, origin {self.origin})",
-            f"duration: {self.duration_s:g} s = {self.sample_count} samples at 1200 Hz",
-            f"range:    min {self.minimum:.6g} {u}, max {self.maximum:.6g} {u}, RMS {self.rms:.6g} {u}",
-            f"rates:    max |slope| {self.max_slope:.6g} {u}/s, max |2nd derivative| "
-            f"{self.max_accel:.6g} {u}/s²",
-            f"spectrum: peak at {self.peak_frequency_hz:.4g} Hz",
-            f"crc:      {self.crc:08x}",
-        ]
-
-
-def summarise(profile: Profile) -> ProfileSummary:
-    x = profile.samples.astype(np.float64)
-    d1 = np.diff(x) * profile.rate
-    d2 = np.diff(d1) * profile.rate
-    _, _, f, psd = preview(profile)
-    peak = float(f[1:][np.argmax(psd[1:])]) if f.size > 1 else 0.0
-    return ProfileSummary(
-        name=profile.name, target=profile.target, units=profile.units, origin=profile.origin,
-        sample_count=profile.sample_count, duration_s=profile.duration,
-        minimum=float(x.min()), maximum=float(x.max()), rms=float(np.sqrt(np.mean(x ** 2))),
-        max_slope=float(np.abs(d1).max()) if d1.size else 0.0,
-        max_accel=float(np.abs(d2).max()) if d2.size else 0.0,
-        peak_frequency_hz=peak, crc=profile.crc())
-
-
-def write_csv(profile: Profile, path: str | Path) -> None:
-    """time_s and the samples (named after the target and its units) as CSV."""
-    column = f"{profile.target.lower()}_{profile.units.replace('/', '_per_').lower()}"
-    x = profile.samples
-    t = np.arange(x.size) / profile.rate
-    with open(path, "w", encoding="utf-8", newline="") as f:
-        f.write(f"# {profile.name}: {profile.target} in {profile.units}, origin {profile.origin}, "
-                f"{profile.rate:g} Hz, from {profile.source or 'memory'}\n")
-        f.write(f"time_s,{column}\n")
-        for ti, xi in zip(t.tolist(), x.tolist()):
-            f.write(f"{ti:.6f},{xi!r}\n")
