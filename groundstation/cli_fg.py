@@ -345,7 +345,7 @@ def _cmd_upload(args) -> int:
         stop_watching()
 
 
-def _journal_motion(reader, channel_hint: int | None = None):
+def _journal_motion(reader):
     """From the log's journal of the function generator (written by the GUI): the last
     upload's settings and the device times where its motion started and stopped."""
     from .logs.reader import LogQueryError
