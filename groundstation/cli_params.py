@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .cli_station import add_device_options, command_station
 from .errors import GroundStationError
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
@@ -63,18 +64,6 @@ def _cmd_validate(args) -> int:
     return EXIT_OK if report.ok else EXIT_REFUSED
 
 
-def _device_options(s) -> None:
-    s.add_argument("--device", default="sim",
-                   help="sim (a simulated testbed started for this command) | tcp://HOST:PORT | "
-                        "serial://PORT?baud=N")
-    s.add_argument("--testbed", default=None,
-                   help="testbed file for --device sim (default: the design's testbed)")
-    s.add_argument("--history", default=None,
-                   help="folder of verified uploads, for rollback (default: "
-                        "$XDG_DATA_HOME/groundstation/parameter_history)")
-    s.add_argument("--take-over", action="store_true", help="end another host's session")
-
-
 def _add_upload(actions) -> None:
     s = actions.add_parser("upload", help="validate a design, upload it and verify it on the device",
                            description="The design's table is built over the device's active one, "
@@ -83,7 +72,7 @@ def _add_upload(actions) -> None:
                                        "verified; 1: refused or failed (the previous table stays "
                                        "active); 2: unreadable file.")
     s.add_argument("file", help="design file, e.g. profiles/controllers/relative_design2.toml")
-    _device_options(s)
+    add_device_options(s, history=True)
     s.set_defaults(func=_cmd_upload)
 
 
@@ -93,55 +82,19 @@ def _add_show(actions) -> None:
                                        "uploaded from this computer, and the device's.")
     s.add_argument("--against", default=None, help="a design file to compare with")
     s.add_argument("--differences", action="store_true", help="only the entries that differ")
-    _device_options(s)
+    add_device_options(s, history=True)
     s.set_defaults(func=_cmd_show)
 
 
 def _add_rollback(actions) -> None:
     s = actions.add_parser("rollback", help="re-activate the table active before the last upload")
-    _device_options(s)
+    add_device_options(s, history=True)
     s.set_defaults(func=_cmd_rollback)
-
-
-class _Device:
-    """--device as a connected client (and the simulator child it started, if any)."""
-
-    def __init__(self, args, testbed: str | None = None):
-        from .link import open_client
-        from .sim.process import device_address
-
-        self.dictionary = load_dictionary_for(args)
-        self.address, self.sim = device_address(args.device, args.testbed or testbed)
-        try:
-            self.client = open_client(self.dictionary, self.address)
-            self.client.connect(take_over=args.take_over)
-        except BaseException:
-            self.close()
-            raise
-
-    def close(self) -> None:
-        client = getattr(self, "client", None)
-        if client is not None:
-            client.close()
-        if self.sim is not None:
-            self.sim.stop()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def load_dictionary_for(args):
     from .dictionary import load_dictionary
     return load_dictionary(args.protocol_dir)
-
-
-def _loader(device: _Device, args):
-    from .params.upload import ParameterHistory, ParameterLoader
-    history = ParameterHistory(args.history or ParameterHistory.default_folder())
-    return ParameterLoader(device.client, device.dictionary, history)
 
 
 def _progress(step: str, fraction: float) -> None:
@@ -159,6 +112,7 @@ def _fail(text: str, code: int = EXIT_REFUSED) -> int:
 
 
 def _cmd_upload(args) -> int:
+    from .params.clearance import ValidationRefused
     from .params.design import load_design, table_values
     from .params.loop import report_lines, validate
 
@@ -175,16 +129,19 @@ def _cmd_upload(args) -> int:
             print(line)
         return _fail(f"{args.file}: refused, nothing was sent")
     try:
-        with _Device(args, testbed=str(design.testbed.path)) as device:
-            loader = _loader(device, args)
-            active = loader.read_active()
-            values = table_values(design, base=active.values, dictionary=dictionary)
-            report = validate(design, values, dictionary)      # the very table that is sent
-            for line in report_lines(design, report):
+        with command_station(args, dictionary, testbed=str(design.testbed.path)) as station:
+            # the very table that is sent - the design over the device's active table -
+            # is validated again inside the upload
+            values = table_values(design, base=station.read_params().values, dictionary=dictionary)
+            for line in report_lines(design, validate(design, values, dictionary)):
                 print(line)
-            if not report.ok:
-                return _fail(f"{args.file}: refused, nothing was sent")
-            record = loader.upload(values, source=str(args.file), progress=_progress)
+            try:
+                record = station.upload_table(values, str(args.file), design=design,
+                                              progress=_progress)
+            except GroundStationError as exc:
+                if isinstance(exc.__cause__, ValidationRefused):
+                    return _fail(f"{args.file}: refused, nothing was sent")
+                raise
             print(f"verified: table {record.crc:08x} v{record.version} active since tick "
                   f"{record.activated_tick} (previous {record.previous_crc:08x}); read back bit for "
                   f"bit, HOUSEKEEPING agrees")
@@ -208,18 +165,18 @@ def _cmd_show(args) -> int:
     except GroundStationError as exc:
         return _fail(str(exc), EXIT_UNREADABLE)
     try:
-        with _Device(args, testbed=testbed) as device:
-            loader = _loader(device, args)
+        with command_station(args, load_dictionary_for(args), testbed=testbed) as station:
+            loader = station.parameter_loader()
             active = loader.read_active()
             if args.against:
-                design_values = table_values(design, base=active.values, dictionary=device.dictionary)
+                design_values = table_values(design, base=active.values, dictionary=station.d)
             uploaded = None
             records = loader.history.records()
             if records:
-                uploaded = ptable.unpack(device.dictionary, loader.history.table(records[-1].crc))
-            rows = three_way(device.dictionary, {"design": design_values, "uploaded": uploaded,
+                uploaded = ptable.unpack(station.d, loader.history.table(records[-1].crc))
+            rows = three_way(station.d, {"design": design_values, "uploaded": uploaded,
                                                  "device": active.values})
-            print(f"device {device.address}: active table {active.crc:08x}")
+            print(f"device {station.address}: active table {active.crc:08x}")
             # the same account of the active table that rollback acts on
             origin = provenance(records, active.crc)
             print(f"active {origin.text()}")
@@ -232,7 +189,7 @@ def _cmd_show(args) -> int:
                 print(f"rollback would re-activate {origin.rollback_target:08x}")
             else:
                 print("rollback: nothing to roll back to from this table")
-            if device.sim is not None:
+            if station.simulated:
                 print(_SIM_NOTE)
             print(format_rows(rows, only_differences=args.differences))
             differ = [r.name for r in rows if r.status == "differs"]
@@ -251,11 +208,11 @@ _SIM_NOTE = ("note: --device sim started a new simulated testbed for this comman
 
 def _cmd_rollback(args) -> int:
     try:
-        with _Device(args) as device:
+        with command_station(args, load_dictionary_for(args)) as station:
             try:
-                record = _loader(device, args).rollback(progress=_progress)
+                record = station.rollback_params(progress=_progress)
             except GroundStationError as exc:
-                return _fail(str(exc) + (f"\n{_SIM_NOTE}" if device.sim is not None else ""))
+                return _fail(str(exc) + (f"\n{_SIM_NOTE}" if station.simulated else ""))
             print(f"rolled back: table {record.crc:08x} active again (was {record.previous_crc:08x}), "
                   f"verified")
     except GroundStationError as exc:

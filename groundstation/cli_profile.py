@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from .cli_station import add_device_options
 from .errors import GroundStationError
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
@@ -54,16 +55,12 @@ def _add_play(actions) -> None:
                                        "1: refused, failed or interrupted (device left safe); "
                                        "2: unreadable file.")
     s.add_argument("file", help="profile file")
-    s.add_argument("--device", default="sim",
-                   help="sim (a simulated testbed started for this command) | tcp://HOST:PORT | "
-                        "HOST:PORT | serial://PORT?baud=N")
-    s.add_argument("--testbed", default=None, help="testbed file for --device sim (and its gyro range)")
+    add_device_options(s)
     s.add_argument("--mode", choices=MODES, default=None,
                    help="mode to play in (default: OPEN_LOOP for currents, RELATIVE for a "
                         "reference, INERTIAL for a rate reference)")
     s.add_argument("--timeout", type=float, default=None,
                    help="seconds to wait for the end after the start (default: duration + 10)")
-    s.add_argument("--take-over", action="store_true", help="end another host's session")
     s.set_defaults(func=_cmd_play)
 
 
@@ -168,8 +165,8 @@ def _safety(player) -> str:
 
 
 def _cmd_play(args) -> int:
-    from .cli_params import _Device
-    from .profiles.upload import ProfilePlayer, default_mode
+    from .cli_station import command_station
+    from .profiles.upload import default_mode
 
     loaded = _load(args)
     if isinstance(loaded, int):
@@ -186,30 +183,31 @@ def _cmd_play(args) -> int:
     print(f"{profile.name}: {profile.target}, {profile.duration:g} s ({profile.sample_count} "
           f"samples), mode {mode}", flush=True)
     progress = _PlayProgress()
-    player = None
+    players: list = []                       # the player, for what it made safe
     try:
-        with _Device(args) as device:
-            with ProfilePlayer(device.client, dictionary, gyro_range=gyro) as player:
-                try:
-                    result = player.play(profile, mode, timeout=args.timeout, progress=progress,
-                                         upload_progress=_upload_progress,
-                                         on_step=lambda text: print(f"{text} ...", flush=True))
-                except KeyboardInterrupt:
-                    progress.done()
-                    return _fail("interrupted: " + _safety(player))
+        with command_station(args, dictionary) as station:
+            try:
+                result = station.play_profile(profile, mode, timeout=args.timeout, gyro_range=gyro,
+                                              progress=progress, upload_progress=_upload_progress,
+                                              on_step=lambda text: print(f"{text} ...", flush=True),
+                                              player_out=players)
+            except KeyboardInterrupt:
                 progress.done()
-                rec = player.record
-                assert rec is not None
-                print(f"loaded: profile {rec.profile_id} crc {rec.crc:08x}, {rec.sample_count} "
-                      f"samples in {rec.upload_s:.2f} s"
-                      + (f", offset {rec.offset:.9g} rad" if rec.origin == "relative" else ""))
-                print(result.text())
-                if not result.completed:
-                    return _fail(f"{profile.name}: playback {result.reason}; " + _safety(player))
-                print("done: disarmed")
+                return _fail("interrupted: " + _safety(players[0] if players else None))
+            progress.done()
+            rec = players[0].record
+            assert rec is not None
+            print(f"loaded: profile {rec.profile_id} crc {rec.crc:08x}, {rec.sample_count} "
+                  f"samples in {rec.upload_s:.2f} s"
+                  + (f", offset {rec.offset:.9g} rad" if rec.origin == "relative" else ""))
+            print(result.text())
+            if not result.completed:
+                return _fail(f"{profile.name}: playback {result.reason}; " + _safety(players[0]))
+            print("done: disarmed")
     except KeyboardInterrupt:
         return _fail("interrupted before playback: the device was not started")
     except GroundStationError as exc:
         progress.done()
+        player = players[0] if players else None
         return _fail(f"{exc}" + (f"; {_safety(player)}" if player is not None and player.made_safe else ""))
     return EXIT_OK

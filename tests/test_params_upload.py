@@ -8,6 +8,7 @@ import pytest
 from groundstation.errors import CommandFailed
 from groundstation.link import open_client
 from groundstation.params import table as ptable
+from groundstation.params.clearance import override_table
 from groundstation.params.upload import (ParameterHistory, ParameterLoader, UploadError,
                                          entry_differences)
 from groundstation.sim import SimulatedDevice
@@ -24,6 +25,16 @@ def live(dictionary):
     dev.stop()
 
 
+def cleared(dictionary, values):
+    """These tests exercise the loader's mechanics on hand-made tables (no design to
+    validate against): cleared by the recorded override, as a bench engineer would."""
+    return override_table(values, dictionary, "test of the loader's mechanics")
+
+
+def send(loader, values, source: str = ""):
+    return loader.upload(values, source, clearance=cleared(loader.d, values))
+
+
 def changed_table(dictionary, **changes):
     values = ptable.default_values(dictionary)
     values.update(changes)
@@ -38,7 +49,8 @@ def test_upload_is_verified_journaled_and_kept_in_the_history(dictionary, live, 
     before = loader.read_active()
     values = changed_table(dictionary, outer_loop_gain=20.0, saturation_fine=12.5)
     steps = []
-    record = loader.upload(values, source="test table", progress=lambda s, f: steps.append(s))
+    record = loader.upload(values, source="test table", progress=lambda s, f: steps.append(s),
+                           clearance=cleared(dictionary, values))
     blob = ptable.pack(dictionary, values)
     assert record.crc == ptable.table_crc(blob) and record.previous_crc == before.crc
     assert {"upload", "read back"} <= set(steps)
@@ -52,7 +64,7 @@ def test_upload_is_verified_journaled_and_kept_in_the_history(dictionary, live, 
     hist = ParameterHistory(tmp_path / "hist")
     assert [r.crc for r in hist.records()] == [record.crc]
     assert hist.table(record.crc) == blob and hist.table(before.crc) == before.blob
-    again = loader.upload(changed_table(dictionary, outer_loop_gain=21.0))
+    again = send(loader, changed_table(dictionary, outer_loop_gain=21.0))
     assert again.version == (record.version + 1) & 0xFFFF
 
 
@@ -60,8 +72,8 @@ def test_rollback_restores_the_previous_table_even_from_a_new_program_run(dictio
     dev, client = live
     loader = ParameterLoader(client, dictionary, ParameterHistory(tmp_path))
     original = loader.read_active()
-    first = loader.upload(changed_table(dictionary, outer_loop_gain=11.0), source="a")
-    loader.upload(changed_table(dictionary, outer_loop_gain=12.0), source="b")
+    first = send(loader, changed_table(dictionary, outer_loop_gain=11.0), source="a")
+    send(loader, changed_table(dictionary, outer_loop_gain=12.0), source="b")
     back = loader.rollback()
     assert back.crc == first.crc and loader.read_active().crc == first.crc
     # a new run (the CLI) knows only the history on disk
@@ -81,7 +93,7 @@ def test_a_nan_is_refused_before_anything_is_sent(dictionary, live):
     sos = np.array(ptable.default_values(dictionary)["inertial_c0"], dtype=float)
     sos[3, 1] = np.nan
     with pytest.raises(ptable.ParameterError, match="inertial_c0"):
-        loader.upload(changed_table(dictionary, inertial_c0=sos))
+        send(loader, changed_table(dictionary, inertial_c0=sos))
     assert not [n for n in sent if n.startswith("PARAM")]
 
 
@@ -125,6 +137,6 @@ def test_an_armed_device_keeps_its_table_and_says_why(dictionary, live):
     client.command("SET_MODE", mode="OPEN_LOOP")
     client.command("ARM")
     with pytest.raises(UploadError, match="disarm first"):
-        loader.upload(changed_table(dictionary, outer_loop_gain=5.0))
+        send(loader, changed_table(dictionary, outer_loop_gain=5.0))
     client.command("DISARM")
     assert loader.read_active().blob == before.blob

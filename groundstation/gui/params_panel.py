@@ -16,9 +16,9 @@ from typing import Any
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt
-from PySide6.QtWidgets import (QCheckBox, QFileDialog, QHBoxLayout, QLabel, QMessageBox,
-                               QProgressBar, QPushButton, QSplitter, QTextBrowser, QTreeWidget,
-                               QTreeWidgetItem, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QCheckBox, QFileDialog, QHBoxLayout, QInputDialog, QLabel,
+                               QMessageBox, QProgressBar, QPushButton, QSplitter, QTextBrowser,
+                               QTreeWidget, QTreeWidgetItem, QVBoxLayout, QWidget)
 
 from ..dictionary import Dictionary, ParameterDef
 from ..errors import GroundStationError
@@ -50,6 +50,8 @@ class ParameterPanel(QWidget):
         self.report: ValidationReport | None = None
         #: tests answer the confirmation dialog through this (None: ask the operator)
         self.confirm_override: bool | None = None
+        #: tests: the reason given for a table without a design (None: ask)
+        self.override_reason: str | None = None
         self._filling = False
         self._build()
         session.sig_params.connect(self._on_params)
@@ -213,6 +215,7 @@ class ParameterPanel(QWidget):
             self._say("nothing to upload: load a design or read the device's table", bad=True)
             return False
         problems = ptable.problems(self.d, self.values)
+        reason = None
         if self.design is not None:
             report = self.run_validation()
             if report is None or not report.ok:
@@ -220,6 +223,14 @@ class ParameterPanel(QWidget):
         elif problems:
             self._say("refused: " + "; ".join(problems), bad=True)
             return False
+        else:
+            # no design: the closed loop cannot be checked, so the table goes only on the
+            # operator's stated reason, which the history and the recording keep
+            reason = self._override_reason()
+            if not reason:
+                self._say("upload cancelled: a table without a design is sent only with a "
+                          "reason (its closed loop is not checked)")
+                return False
         crc = ptable.table_crc(ptable.pack(self.d, self.values))
         what = self.source or "the edited table"
         if confirm and not self._confirm(f"Upload parameter table {crc:08x} from {what} to the device?\n"
@@ -229,13 +240,22 @@ class ParameterPanel(QWidget):
         self._sent = dict(self.values)
         self.progress.setVisible(True)
         self.progress.setValue(0)
-        self.session.params_upload(dict(self.values), what)
+        self.session.params_upload(dict(self.values), what, design=self.design, accept_risk=reason)
         return True
 
     def rollback(self) -> None:
         if self._confirm("Roll the device back to the table that was active before the last upload?"):
             self.progress.setVisible(True)
             self.session.params_rollback()
+
+    def _override_reason(self) -> str:
+        if self.override_reason is not None:
+            return self.override_reason
+        text, ok = QInputDialog.getText(
+            self, "Upload without a design",
+            "No design is loaded, so this table's closed loop is not checked.\n"
+            "Why is it safe to send? (kept in the parameter history and the recording)")
+        return text.strip() if ok else ""
 
     def _confirm(self, text: str) -> bool:
         if self.confirm_override is not None:

@@ -332,10 +332,18 @@ class Session(QObject):
         self._param_work("read", lambda loader: self.sig_params.emit(
             "active", loader.read_active(self._param_progress)))
 
-    def params_upload(self, values: dict, source: str) -> None:
-        """Upload and verify a table (worker thread): 'uploaded', then 'active'."""
+    def params_upload(self, values: dict, source: str, design=None,
+                      accept_risk: str | None = None) -> None:
+        """Validate (against `design`), upload and verify a table (worker thread):
+        'uploaded', then 'active'.  Without a design, or refused by the validation, it is
+        sent only with `accept_risk`, the operator's reason (recorded)."""
+        from ..params.clearance import clear_design, override_table
+
         def work(loader):
-            record = loader.upload(values, source, progress=self._param_progress)
+            clearance = (clear_design(design, values, self.d, accept_risk)[0] if design is not None
+                         else override_table(values, self.d, accept_risk or ""))
+            record = loader.upload(values, source, progress=self._param_progress,
+                                   clearance=clearance)
             self._uploaded(record)
             self.sig_params.emit("active", loader.read_active())
         self._param_work("upload", work)

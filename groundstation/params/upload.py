@@ -25,6 +25,7 @@ import numpy as np
 from ..dictionary import Dictionary
 from ..errors import CommandFailed, CommandRejected, GroundStationError
 from . import table as ptable
+from .clearance import Clearance
 
 #: how long HOUSEKEEPING (10 Hz) may take to show the new CRC after the commit
 HOUSEKEEPING_WAIT_S = 3.0
@@ -45,6 +46,10 @@ class UploadError(GroundStationError):
 
 class VerifyError(UploadError):
     """The device reports a table other than the one sent."""
+
+
+class NotClearedError(UploadError):
+    """A table offered for upload without a Clearance for exactly its bytes."""
 
 
 @dataclass
@@ -72,6 +77,11 @@ class UploadRecord:
     activated_tick: int
     device: str = ""
     notes: list[str] = field(default_factory=list)
+    #: the upload gate (clearance.py): validated, or the override's reason and the
+    #: problems it overrode.  A rollback re-activates a table the device ran before.
+    validated: bool = True
+    override_reason: str = ""
+    validation_problems: list[str] = field(default_factory=list)
 
 
 def entry_differences(dictionary: Dictionary, a: Mapping[str, Any], b: Mapping[str, Any]) -> list[str]:
@@ -258,17 +268,32 @@ class ParameterLoader:
 
     # ------------------------------------------------------------------ uploading
     def upload(self, values: Mapping[str, Any], source: str = "",
-               progress: Callable[[str, float], None] | None = None) -> UploadRecord:
+               progress: Callable[[str, float], None] | None = None, *,
+               clearance: Clearance | None = None) -> UploadRecord:
         """Send a complete table and verify it; raise UploadError (or ParameterError
-        for a table refused here) on anything short of verified."""
+        for a table refused here) on anything short of verified.
+
+        `clearance` (clearance.py) must clear exactly this table: validated against its
+        design, or overridden with a recorded reason.  Without one nothing is sent."""
         problems = ptable.problems(self.d, values)
         if problems:
             raise ptable.ParameterError("table refused before sending: " + "; ".join(problems))
         blob = ptable.pack(self.d, values)
-        return self._upload_blob(blob, source, progress)
+        if not isinstance(clearance, Clearance):
+            raise NotClearedError(
+                f"{source or 'table'}: refused, nothing sent: the table has not been validated "
+                f"(clear it with clear_design(design, values, dictionary), or give the reason to "
+                f"send it unvalidated with override_table(values, dictionary, reason))")
+        crc = ptable.table_crc(blob)
+        if clearance.table_crc != crc:
+            raise NotClearedError(
+                f"{source or 'table'}: refused, nothing sent: the clearance is for table "
+                f"{clearance.table_crc:08x}, this table is {crc:08x} (changed after validation?)")
+        return self._upload_blob(blob, source, progress, clearance.record())
 
     def _upload_blob(self, blob: bytes, source: str,
-                     progress: Callable[[str, float], None] | None) -> UploadRecord:
+                     progress: Callable[[str, float], None] | None,
+                     gate: Mapping[str, Any] | None = None) -> UploadRecord:
         crc = ptable.table_crc(blob)
         waiter = _HousekeepingWaiter(self.client, crc)
         try:
@@ -300,6 +325,10 @@ class ParameterLoader:
         record = UploadRecord(time=time.time(), source=source, version=version, crc=crc,
                               previous_crc=previous.crc, activated_tick=int(reply["tick"]),
                               device=str(self.client.device_info.get("description", "")))
+        if gate is not None:
+            record.validated = bool(gate["validated"])
+            record.override_reason = str(gate["override_reason"])
+            record.validation_problems = list(gate["validation_problems"])
         self.last_uploaded = record
         self.history.add(record, blob, previous.blob)
         if self.journal is not None:

@@ -84,14 +84,3 @@ class SimulatorProcess:
 
     def __exit__(self, *exc) -> None:
         self.stop()
-
-
-def device_address(device: str, testbed: str | None = None) -> tuple[str, SimulatorProcess | None]:
-    """What the CLI's --device means: 'sim' starts the simulated testbed as a child
-    process (the caller stops it) and returns its address; anything else is an address."""
-    if device != "sim":
-        return device, None
-    sim = SimulatorProcess(pacing="realtime", testbed=testbed)
-    address = sim.start()
-    print(f"started the simulated testbed on {address}", flush=True)
-    return address, sim

@@ -1,0 +1,130 @@
+"""One recording of a session: the Recorder on the session's link, its journal, and a
+closing record that says why it ended.
+
+The Station starts and stops it; every journal entry of the session (parameter tables,
+profiles, generator settings, script marks) goes through `journal()`, which writes
+nothing when no recording runs."""
+
+from __future__ import annotations
+
+import logging
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+from ..errors import GroundStationError
+from ..logs import Recorder
+from ..logs.live import attach_recorder
+from ..params.upload import ParameterLoader
+
+log = logging.getLogger(__name__)
+
+
+class RecordingSlot:
+    """At most one recording at a time on a session's link; `entries` lists every one
+    that ended (name, files, frames, discarded blocks, link drops, how it ended)."""
+
+    def __init__(self, echo: Callable[[str], None]):
+        self.echo = echo
+        self.recorder: Recorder | None = None
+        self.entries: list[dict[str, Any]] = []
+        self._detach: Callable[[], None] | None = None
+        self._drops_at_start = 0
+        self._t0 = 0.0
+
+    @property
+    def active(self) -> bool:
+        return self.recorder is not None
+
+    def start(self, client, dictionary, testbed, folder: Path, name: str, notes: str = "",
+              on_failure: Callable[[str], None] | None = None) -> Path:
+        assert self.recorder is None, "one recording at a time (the Station checks)"
+        rec = Recorder(dictionary, folder, test_name=name, notes=notes,
+                       testbed_text=testbed.path.read_text(), testbed_name=testbed.name,
+                       testbed_path=str(testbed.path), on_failure=on_failure)
+        path = rec.start()
+        try:
+            if client is not None:
+                self._detach = attach_recorder(client, rec)
+        finally:
+            # ours from here on, so that a make_safe closes it with its reason even when
+            # a Ctrl-C lands in the middle of this step
+            self.recorder = rec
+        self._drops_at_start = link_drops(client)
+        self._t0 = time.monotonic()
+        if client is not None:
+            # every log carries the table the device runs, whatever was uploaded before
+            try:
+                active = ParameterLoader(client, dictionary).read_active()
+                rec.record("parameter_table", {"source": "active at recording start",
+                                               "crc": active.crc}, active.blob)
+            except GroundStationError as exc:
+                rec.note(f"could not read the active parameter table: {exc}")
+        if notes:
+            rec.note(notes)
+        self.echo(f"recording {path}")
+        return path
+
+    def attach(self, client) -> None:
+        """A new link of the same session (a reconnect): the recording goes on on it."""
+        if self.recorder is not None and self.recorder.state == "recording":
+            self.detach()
+            self._detach = attach_recorder(client, self.recorder)
+
+    def detach(self) -> None:
+        """The recorder off the link: telemetry, command and link listeners."""
+        detach, self._detach = self._detach, None
+        if detach is not None:
+            detach()
+
+    def stop(self, client) -> tuple[dict[str, Any], Any]:
+        """Close it; returns (entry, RecorderStatus)."""
+        rec = self.recorder
+        if rec is None:
+            raise GroundStationError("stop_recording: nothing is recording")
+        self.recorder = None
+        self.detach()
+        status = rec.stop()
+        entry = {"name": rec.test_name, "files": [str(p) for p in status.files],
+                 "frames": status.frames, "discarded_blocks": rec.discarded_blocks,
+                 "dropped": link_drops(client) - self._drops_at_start,
+                 "wall_seconds": round(time.monotonic() - self._t0, 3)}
+        self.entries.append(entry)
+        if status.state == "stopped":
+            self.echo(f"recorded {status.frames} frames to {', '.join(p.name for p in status.files)}")
+        return entry, status
+
+    def close(self, reason: str = "") -> None:
+        """Close the recording (if any), its last journal entry saying why: the log then
+        explains its own end - an operator's Ctrl-C, a failed step, the end of a script.
+        Never raises."""
+        rec, self.recorder = self.recorder, None
+        if rec is None:
+            return
+        self.detach()
+        why = reason or "end of the session"
+        try:
+            rec.note(f"recording closed: {why}")
+        except Exception:                          # closing must go on regardless
+            log.exception("could not note why the recording closes")
+        status = rec.stop(reason=why)
+        self.entries.append({"name": rec.test_name, "files": [str(p) for p in status.files],
+                             "frames": status.frames, "discarded_blocks": rec.discarded_blocks,
+                             "state": status.state, "stop_reason": why})
+
+    def journal(self, kind: str, record: dict, blob: bytes = b"") -> None:
+        rec = self.recorder
+        if rec is not None:
+            rec.record(kind, record, blob)
+
+    def mark(self, source: str, text: str, **extra: Any) -> None:
+        rec = self.recorder
+        if rec is not None:
+            rec.record("event", {"source": source, "text": text, **extra})
+
+
+def link_drops(client) -> int:
+    """Frames lost on the link so far (sequence gaps, every packet)."""
+    if client is None:
+        return 0
+    return sum(ps.dropped for ps in client.stats.snapshot().packets.values())

@@ -1,0 +1,532 @@
+"""`Station`: one session with a testbed (or its simulation), without Qt.
+
+It owns what a session is made of - the device link, the simulator (a child process, or
+in this process with a script-driven clock), the function generator, the recording and
+its journal, the parameter history - and offers the verbs every front end uses: the
+CLI's commands call them directly, a script or notebook uses them through
+`from groundstation import Testbed`, the window's Session runs them on worker threads.
+
+    from groundstation import Testbed           # Testbed is Station
+
+    with Testbed("sim", testbed="profiles/testbeds/relative_2dof.toml", fast=True) as tb:
+        tb.upload_design("profiles/controllers/relative_design2.toml")
+        tb.set_mode("RELATIVE")
+        tb.arm()
+        tb.start_recording("step", notes="Design #2, 1 mrad step")
+        tb.set_reference(1e-3)
+        tb.dwell(2.0)
+        tb.stop_recording()
+
+Safety lives here, not in the callers:
+* a parameter table is uploaded only with a Clearance (params/clearance.py): validated
+  against its design, or sent on an explicit override whose reason is recorded in the
+  history and the log; the table commands cannot be sent around it (`command` refuses
+  them);
+* whatever ends the session - an exception, Ctrl-C, a lost link - `make_safe` leaves
+  the rig safe: ABORT (motors off, disarmed), the generator's outputs off, the recording
+  closed with everything received so far and the reason it closed.
+
+`device="sim"` starts the simulated testbed: with `fast=True` in this process, its
+clock driven by the session (a 60 s dwell takes about a second); without, as a
+real-time child process, exactly as `make run` does.  Any other value is a rig's address.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Mapping
+
+from ..clock import ScriptAborted, SteppedClock, WallClock
+from ..dictionary import Dictionary, load_dictionary
+from ..errors import GroundStationError
+from ..link import open_client
+from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
+from ..plant.testbed import load_testbed
+from .recording import RecordingSlot, link_drops
+from .tracker import DeviceStateTracker
+
+log = logging.getLogger(__name__)
+
+#: the commands that change the parameter table: only ParameterLoader sends them, and
+#: only for a cleared table (Station.command refuses them)
+TABLE_COMMANDS = frozenset({"PARAM_BEGIN", "PARAM_WRITE", "PARAM_COMMIT"})
+
+
+class ScriptError(GroundStationError):
+    """A step of a script or campaign could not be done (the message says which and why)."""
+
+
+class Station:
+    """One session with a testbed (or its simulation); see the module docstring."""
+
+    __test__ = False        # `Testbed` is this class: a name pytest must not collect
+
+    def __init__(self, device: str = "sim", *, testbed: str | Path | None = None, fast: bool = False,
+                 generator: str | None = "auto", log_folder: str | Path = "logs", seed: int = 0,
+                 history: str | Path | ParameterHistory | MemoryHistory | None = None,
+                 take_over: bool = False, speed: float = 1.0,
+                 dictionary: Dictionary | None = None,
+                 operator: Callable[[str], bool] | None = None,
+                 echo: Callable[[str], None] | None = None):
+        self.device_spec = device
+        self.testbed_path = Path(testbed) if testbed else None
+        self.fast = fast
+        self.generator_spec = generator
+        self.log_folder = Path(log_folder)
+        self.seed = seed
+        self.speed = speed
+        self.history = (history if isinstance(history, (ParameterHistory, MemoryHistory))
+                        else ParameterHistory(history) if history else None)
+        self.take_over = take_over
+        #: asked at a pause step; True goes on, False aborts (None: refuse pauses)
+        self.operator = operator
+        self.echo = echo or (lambda text: log.info("%s", text))
+        self.d = dictionary or load_dictionary()
+        self.testbed = load_testbed(self.testbed_path)
+        self.abort_event = threading.Event()
+        self.state = DeviceStateTracker()
+        self.client = None
+        self.address = ""
+        self.clock: WallClock | SteppedClock | None = None
+        self.generator = None
+        self.recording = RecordingSlot(self.echo)
+        self.last_upload = None
+        self._device = None          # in-process SimulatedDevice (fast)
+        self._fg_server = None
+        self._sim = None             # SimulatorProcess (real-time simulation)
+        #: attach(): the client belongs to someone else (the GUI's session) - close() leaves
+        #: it open; likewise a generator driver passed in is not ours to close
+        self._attached = False
+        self._owns_generator = True
+        # abort() runs make_safe on the caller's thread while the script's own thread may
+        # be making safe after its step failed: one at a time, or both would close the
+        # same recording
+        self._safe_lock = threading.RLock()
+
+    # ------------------------------------------------------------------ session
+    @classmethod
+    def attach(cls, client, *, testbed: str | Path | None = None, generator=None,
+               log_folder: str | Path = "logs", history=None,
+               operator: Callable[[str], bool] | None = None,
+               echo: Callable[[str], None] | None = None) -> "Station":
+        """A session on a connection that is already open and owned by someone else (the
+        GUI's, whose charts then show the script live).  `client` is a connected
+        DeviceClient; time is wall time (a real-time device).  `generator` is None, a
+        VISA resource (opened here, closed by close()) or an open FunctionGenerator4050
+        (used, never closed here).  `history` a folder or a ParameterHistory.
+
+        make_safe()/abort() act as always (ABORT on the shared link, generator outputs
+        off, this session's recording closed); close() closes only what the session
+        opened itself - the client stays open, with this session's subscriptions removed."""
+        if client is None or client.link_state != "up":
+            raise ScriptError("attach: the link is not up - connect to the device first")
+        st = cls("attached", testbed=testbed, generator=None, log_folder=log_folder,
+                 history=history, dictionary=client.dictionary, operator=operator, echo=echo)
+        st._attached = True
+        st.client = client
+        st.address = getattr(client, "address", "")
+        client.subscribe(st.state)
+        st.clock = WallClock(client, st.abort_event)
+        if isinstance(generator, str):
+            from ..instruments.fg4050 import open_generator
+            try:
+                st.generator = open_generator(generator, testbed=st.testbed)
+            except BaseException:
+                client.unsubscribe(st.state)
+                raise
+        elif generator is not None:
+            st.generator, st._owns_generator = generator, False
+        st.echo("attached to the open link" + (f", generator {st.generator.resource_name}"
+                                                 if st.generator is not None else ""))
+        return st
+
+    @property
+    def attached(self) -> bool:
+        return self._attached
+
+    @property
+    def simulated(self) -> bool:
+        """True when this session started the simulated testbed it talks to."""
+        return self._device is not None or self._sim is not None
+
+    @property
+    def recorder(self):
+        return self.recording.recorder
+
+    @property
+    def recordings(self) -> list[dict[str, Any]]:
+        return self.recording.entries
+
+    def __enter__(self) -> "Station":
+        self.open()
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        try:
+            if exc_type is not None and issubclass(exc_type, KeyboardInterrupt):
+                reason = "interrupted by the operator (Ctrl-C)"
+            else:
+                reason = f"{exc_type.__name__}: {exc}" if exc_type else "end of script"
+            self.make_safe(reason=reason)
+        finally:
+            self.close()
+
+    def open(self) -> None:
+        if self._attached:                 # attach() did the opening
+            return
+        try:
+            self._open()
+        except BaseException:
+            self.close()                   # a simulator started for a failed connect
+            raise
+
+    def _open(self) -> None:
+        resource = None
+        want_fg = (self.generator_spec == "auto" and self.testbed.inertial) or self.generator_spec == "sim"
+        if self.device_spec == "sim":
+            if self.fast:
+                from ..sim.device import SimulatedDevice
+                from ..sim.firmware import Firmware
+
+                fw = Firmware(self.d, seed=self.seed, testbed=self.testbed)
+                self._device = SimulatedDevice(self.d, pacing="manual", firmware=fw).start()
+                address = f"127.0.0.1:{self._device.tcp_port}"
+                if want_fg:
+                    from ..sim.scpi_fg import attach_generator
+                    self._fg_server = attach_generator(self._device)
+                    resource = self._fg_server.resource
+            else:
+                from ..sim.process import SimulatorProcess
+                self._sim = SimulatorProcess(pacing="realtime", seed=self.seed,
+                                             testbed=str(self.testbed.path), speed=self.speed,
+                                             fg_port=0 if want_fg else None)
+                address = self._sim.start()
+                resource = self._sim.fg_resource
+        else:
+            address = self.device_spec
+            if self.generator_spec not in (None, "auto", "none", "sim"):
+                resource = self.generator_spec
+        self.address = address
+        self.echo(f"device {address}" + (f", generator {resource}" if resource else ""))
+        self.client = open_client(self.d, address)
+        self.client.subscribe(self.state)
+        self.client.connect(take_over=self.take_over)
+        self.clock = (SteppedClock(self._device, self.client, self.abort_event) if self._device
+                      else WallClock(self.client, self.abort_event))
+        if resource:
+            from ..instruments.fg4050 import open_generator
+            self.generator = open_generator(resource, testbed=self.testbed)
+
+    def close(self) -> None:
+        """Close everything this session opened (after make_safe)."""
+        for step in (self.recording.close, self._close_generator, self._close_clock,
+                     self._close_client, self._stop_sim):
+            try:
+                step()
+            except Exception:                          # closing must reach every step
+                log.exception("closing the session: %s failed", getattr(step, "__name__", step))
+
+    def make_safe(self, reason: str = "") -> None:
+        """ABORT the device, generator outputs off, recording closed.  Never raises."""
+        with self._safe_lock:
+            self._make_safe(reason)
+
+    def _make_safe(self, reason: str) -> None:
+        if self.client is not None and self.client.link_state == "up":
+            try:
+                self.client.command("ABORT")
+            except GroundStationError as exc:
+                log.error("ABORT failed: %s", exc)
+        if self.generator is not None:
+            try:
+                self.generator.abort()
+            except Exception as exc:                   # the driver logs and retries itself
+                log.error("generator off failed: %s", exc)
+        if self.recording.active:
+            try:
+                self.mark(f"stopped: {reason}" if reason else "stopped")
+            except GroundStationError:
+                pass
+        self.recording.close(reason)
+
+    def recover(self, reason: str = "", settle_s: float = 3.0) -> None:
+        """After a failed run: make safe, let the rig come to rest for `settle_s` (a
+        lightly damped base stage rings on after its generator stops), then acknowledge
+        the latched fault (DISARM) and wait until the telemetry shows it cleared, so the
+        next run can arm again."""
+        self.make_safe(reason)
+        self.clock.advance(settle_s)
+        self.client.command("DISARM")
+        deadline = time.monotonic() + 5.0
+        tick = self.state.tick
+        while (self.state.fault or self.state.tick == tick) and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if self.state.fault:
+            raise ScriptError("the device still reports a fault after DISARM")
+
+    def abort(self) -> None:
+        """From any thread: stop the script at its next wait, and make the rig safe now."""
+        self.abort_event.set()
+        self.make_safe("abort")
+
+    # ------------------------------------------------------------------ device verbs
+    def command(self, name: str, **args: Any):
+        if name in TABLE_COMMANDS:
+            raise ScriptError(f"{name}: the parameter table changes only through "
+                              f"upload_design/upload_table (validated, verified, recorded)")
+        self._check_running()
+        return self.client.command(name, **args)
+
+    def set_mode(self, mode: str) -> None:
+        self.command("SET_MODE", mode=mode)
+
+    def arm(self) -> None:
+        self.command("ARM")
+
+    def disarm(self) -> None:
+        self.command("DISARM")
+
+    def friction_comp(self, on: bool) -> None:
+        self.command("FRICTION_COMP", enable=int(bool(on)))
+
+    def set_reference(self, angle_rad: float) -> None:
+        self.command("SET_REFERENCE", reference=float(angle_rad))
+
+    def set_currents(self, coarse_a: float = 0.0, fine_a: float = 0.0) -> None:
+        self.command("SET_CURRENTS", current_coarse=float(coarse_a), current_fine=float(fine_a))
+
+    # ------------------------------------------------------------------ parameter table
+    def parameter_loader(self) -> ParameterLoader:
+        """The loader on this session's link, journaling into its recording."""
+        if self.client is None:
+            raise ScriptError("the session is not open")
+        if self.history is None:
+            self.history = MemoryHistory()
+        return ParameterLoader(self.client, self.d, self.history, journal=self.recording.journal)
+
+    def read_params(self, progress: Callable[[str, float], None] | None = None):
+        """The device's active table (ActiveTable: bytes, CRC, values)."""
+        return self.parameter_loader().read_active(progress)
+
+    def upload_design(self, path: str | Path, accept_risk: str | None = None,
+                      progress: Callable[[str, float], None] | None = None):
+        """Validate a controller design against this testbed's model and upload it,
+        verified.  The table is the design's over the device's active one, and that very
+        table is validated.  A design the validation refuses is not sent, unless
+        `accept_risk` gives the reason an engineer accepts it (recorded in the history and
+        the log); the device still applies its own checks."""
+        from ..params.design import load_design, table_values
+
+        self._check_running()
+        design = load_design(path)
+        active = self.read_params()
+        values = table_values(design, base=active.values, dictionary=self.d)
+        return self.upload_table(values, str(path), design=design, accept_risk=accept_risk,
+                                 progress=progress)
+
+    def upload_table(self, values: Mapping[str, Any], source: str, *, design=None,
+                     accept_risk: str | None = None,
+                     progress: Callable[[str, float], None] | None = None):
+        """Upload a complete table, verified.  With `design` it is validated against it;
+        without one the closed loop cannot be checked, so it is sent only with
+        `accept_risk` (the override, recorded).  Returns the UploadRecord."""
+        from ..params.clearance import ValidationRefused, clear_design, override_table
+
+        self._check_running()
+        try:
+            if design is not None:
+                clearance, _ = clear_design(design, values, self.d, accept_risk)
+            else:
+                clearance = override_table(values, self.d, accept_risk or "")
+        except ValidationRefused as exc:
+            raise ScriptError(f"{source}: {exc}") from exc
+        if clearance.overridden:
+            self.echo(f"WARNING: uploading {source} although it is not validated "
+                      f"({'; '.join(clearance.problems)}); reason given: {clearance.override_reason}")
+            source += f" (not validated; accepted: {clearance.override_reason})"
+        self.last_upload = self.parameter_loader().upload(values, source=source, progress=progress,
+                                                          clearance=clearance)
+        self.echo(f"parameter table {self.last_upload.crc:08x} verified ({source})")
+        return self.last_upload
+
+    def rollback_params(self, progress: Callable[[str, float], None] | None = None):
+        """Re-activate the table that was active before the upload that made the active one."""
+        self._check_running()
+        record = self.parameter_loader().rollback(progress=progress)
+        self.echo(f"rolled back: table {record.crc:08x} active again (was {record.previous_crc:08x})")
+        return record
+
+    # ------------------------------------------------------------------ profiles
+    def play_profile(self, profile, mode: str | None = None, *, timeout: float | None = None,
+                     gyro_range: float | None = None,
+                     progress: Callable[[int, int], None] | None = None,
+                     upload_progress: Callable[[str, float], None] | None = None,
+                     on_step: Callable[[str], None] | None = None, player_out: list | None = None):
+        """Upload a profile (verified), set the mode, arm, play it sample-exact to its end,
+        disarm; on anything else the player makes the device safe.  Returns the
+        PlaybackResult whether or not it completed.  `player_out` receives the player
+        (what it made safe, its upload record) for a caller that must report it."""
+        from ..profiles.upload import ProfilePlayer
+
+        self._check_running()
+        kwargs = {} if gyro_range is None else {"gyro_range": gyro_range}
+        player = ProfilePlayer(self.client, self.d, journal=self.recording.journal, **kwargs)
+        if player_out is not None:
+            player_out.append(player)
+        try:
+            with self.clock.fast_forward():
+                return player.play(profile, mode, timeout=timeout, progress=progress,
+                                   upload_progress=upload_progress, on_step=on_step)
+        finally:
+            player.close()
+
+    def play(self, profile, mode: str | None = None, *, max_seconds: float | None = None,
+             progress: Callable[[float], None] | None = None):
+        """Play a command profile (a file or a Profile) to its end; on the fast simulator
+        the device clock runs flat out meanwhile.  `max_seconds` shortens a longer profile
+        (trial runs, tests) with a smooth return to rest over its last 0.2 s.  Returns the
+        PlaybackResult; raises when playback did not complete."""
+        from ..profiles.profile import Profile, load_profile
+
+        prof = profile if isinstance(profile, Profile) else load_profile(profile, self.d)
+        if max_seconds is not None and prof.duration > max_seconds:
+            prof = _shortened(prof, max_seconds)
+        result = self.play_profile(
+            prof, mode, on_step=lambda text: self.echo(f"{prof.name}: {text}"),
+            progress=(lambda done, total: progress(done / max(total, 1))) if progress else None)
+        if not result.completed:
+            if self.abort_event.is_set():          # ended by our own abort: say so
+                raise ScriptAborted(f"profile {prof.name}: aborted ({result.text()})")
+            raise ScriptError(f"profile {prof.name}: {result.text()}")
+        self.echo(f"profile {prof.name}: {prof.sample_count} samples played")
+        return result
+
+    # ------------------------------------------------------------------ time
+    def dwell(self, seconds: float, progress: Callable[[float], None] | None = None) -> None:
+        """Let `seconds` of device time pass (fast on the fast simulator)."""
+        self._check_running()
+        # a fault ends the wait at once: the log then ends near the fault, not a minute on
+        self.clock.advance(seconds, progress, until=lambda: self.state.fault)
+        self._check_running()
+
+    def pause(self, prompt: str) -> None:
+        """Wait for the operator; refused when nobody can answer (a non-interactive run)."""
+        if self.operator is None:
+            raise ScriptError(f"pause '{prompt}': no operator to answer in this run")
+        self.echo(f"PAUSE: {prompt}")
+        if not self.operator(prompt):
+            raise ScriptAborted(f"the operator stopped at '{prompt}'")
+
+    # ------------------------------------------------------------------ recording
+    def start_recording(self, name: str, notes: str = "") -> Path:
+        if self.recording.active:
+            raise ScriptError(f"start_recording '{name}': '{self.recorder.test_name}' is still recording")
+        return self.recording.start(self.client, self.d, self.testbed, self.log_folder, name, notes)
+
+    def stop_recording(self) -> dict[str, Any]:
+        if not self.recording.active:
+            raise ScriptError("stop_recording: nothing is recording")
+        name = self.recording.recorder.test_name
+        entry, status = self.recording.stop(self.client)
+        if status.state != "stopped":
+            raise ScriptError(f"recording '{name}' ended badly: {status.state} {status.error}")
+        return entry
+
+    def mark(self, text: str) -> None:
+        """An event in the current log (and the script's output)."""
+        self.echo(f"mark: {text}")
+        self.recording.mark("script", text)
+
+    # ------------------------------------------------------------------ generator
+    def _need_generator(self, what: str):
+        if self.generator is None:
+            raise ScriptError(f"{what}: no function generator in this session "
+                              f"(give generator='sim' or a VISA resource)")
+        return self.generator
+
+    def generator_set(self, channel: int = 1, *, waveform: str = "SINE", frequency_hz: float | None = None,
+                      amplitude_vpp: float | None = None, offset_v: float = 0.0,
+                      phase_deg: float = 0.0, output: bool = True) -> None:
+        gen = self._need_generator("generator_set")
+        gen.configure(channel, waveform=waveform, frequency_hz=frequency_hz,
+                      amplitude_vpp=amplitude_vpp, offset_v=offset_v, phase_deg=phase_deg)
+        gen.set_output(channel, output)
+        self.echo(f"generator: {gen.describe(channel)}")
+
+    def generator_off(self) -> None:
+        if self.generator is not None:
+            self.generator.abort()
+
+    def play_base_motion(self, psd_file: str | Path, *, duration_s: float = 60.0, seed: int = 0,
+                         rms_rad: float | None = None, channel: int = 1):
+        """Synthesise a base-motion profile from a PSD table, upload it to the generator
+        and switch the output on; returns the profile (for the achieved-vs-target check)."""
+        from ..basemotion import load_profile
+
+        gen = self._need_generator("play_base_motion")
+        profile = load_profile(psd_file, self.testbed, duration_s=duration_s, seed=seed,
+                               target_rms_rad=rms_rad)
+        gen.upload_arbitrary(channel, profile.volts, name=Path(psd_file).stem[:8].upper(),
+                             frequency_hz=1.0 / profile.duration_s)
+        gen.set_output(channel, True)
+        self.echo(f"base motion {profile.name}: {profile.amplitude_vpp:.3f} Vpp, "
+                  f"{profile.duration_s:g} s period")
+        self.recording.mark("generator", f"base motion {profile.name} on",
+                            amplitude_vpp=profile.amplitude_vpp)
+        return profile
+
+    # ------------------------------------------------------------------ helpers
+    def _link_drops(self) -> int:
+        return link_drops(self.client)
+
+    def _check_running(self) -> None:
+        if self.abort_event.is_set():
+            raise ScriptAborted("aborted")
+        if self.client is None:
+            raise ScriptError("the session is not open")
+        if self.state.fault:
+            raise ScriptError("the device reports a fault (see its EVENTs); it has disarmed")
+
+    def _close_generator(self) -> None:
+        gen, self.generator = self.generator, None
+        if gen is not None and self._owns_generator:
+            gen.close()
+        server, self._fg_server = self._fg_server, None
+        if server is not None:
+            server.stop()
+
+    def _close_clock(self) -> None:
+        if self.clock is not None:
+            self.clock.close()
+
+    def _close_client(self) -> None:
+        client, self.client = self.client, None
+        if client is not None and self._attached:
+            client.unsubscribe(self.state)     # the owner's link goes on without us
+        elif client is not None:
+            client.close()
+
+    def _stop_sim(self) -> None:
+        dev, self._device = self._device, None
+        if dev is not None:
+            dev.stop()
+        sim, self._sim = self._sim, None
+        if sim is not None:
+            sim.stop()
+
+
+def _shortened(profile, seconds: float):
+    """The first `seconds` of a profile, brought back to rest (0) over its last 0.2 s."""
+    import dataclasses
+
+    import numpy as np
+
+    n = max(4, int(seconds * profile.rate))
+    k = max(2, min(int(0.2 * profile.rate), n // 2))
+    samples = np.array(profile.samples[:n], dtype=np.float64)
+    fade = 0.5 + 0.5 * np.cos(np.pi * np.arange(1, k + 1) / k)      # 1 -> 0 with zero slope
+    samples[-k:] *= fade
+    return dataclasses.replace(profile, samples=samples, name=f"{profile.name} (first {seconds:g} s)")
