@@ -45,7 +45,7 @@ from ..errors import GroundStationError
 from ..link import open_client
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
-from .recording import RecordingSlot, link_drops
+from .recording import RecordingSlot
 from .tracker import DeviceStateTracker
 
 log = logging.getLogger(__name__)
@@ -101,6 +101,7 @@ class Station:
         #: it open; likewise a generator driver passed in is not ours to close
         self._attached = False
         self._owns_generator = True
+        self._owner_journal: Callable[[str, dict, bytes], None] | None = None
         # abort() runs make_safe on the caller's thread while the script's own thread may
         # be making safe after its step failed: one at a time, or both would close the
         # same recording
@@ -110,13 +111,17 @@ class Station:
     @classmethod
     def attach(cls, client, *, testbed: str | Path | None = None, generator=None,
                log_folder: str | Path = "logs", history=None,
+               journal: Callable[[str, dict, bytes], None] | None = None,
                operator: Callable[[str], bool] | None = None,
                echo: Callable[[str], None] | None = None) -> "Station":
         """A session on a connection that is already open and owned by someone else (the
         GUI's, whose charts then show the script live).  `client` is a connected
         DeviceClient; time is wall time (a real-time device).  `generator` is None, a
         VISA resource (opened here, closed by close()) or an open FunctionGenerator4050
-        (used, never closed here).  `history` a folder or a ParameterHistory.
+        (used, never closed here).  `history` a folder or a ParameterHistory.  `journal`
+        (kind, record, blob) receives what the session's verbs journal (uploads, profiles)
+        when the owner keeps its own recording (the window's); by default it goes to this
+        session's recording.
 
         make_safe()/abort() act as always (ABORT on the shared link, generator outputs
         off, this session's recording closed); close() closes only what the session
@@ -126,6 +131,7 @@ class Station:
         st = cls("attached", testbed=testbed, generator=None, log_folder=log_folder,
                  history=history, dictionary=client.dictionary, operator=operator, echo=echo)
         st._attached = True
+        st._owner_journal = journal
         st.client = client
         st.address = getattr(client, "address", "")
         client.subscribe(st.state)
@@ -305,7 +311,7 @@ class Station:
             raise ScriptError("the session is not open")
         if self.history is None:
             self.history = MemoryHistory()
-        return ParameterLoader(self.client, self.d, self.history, journal=self.recording.journal)
+        return ParameterLoader(self.client, self.d, self.history, journal=self._journal)
 
     def read_params(self, progress: Callable[[str, float], None] | None = None):
         """The device's active table (ActiveTable: bytes, CRC, values)."""
@@ -373,7 +379,7 @@ class Station:
 
         self._check_running()
         kwargs = {} if gyro_range is None else {"gyro_range": gyro_range}
-        player = ProfilePlayer(self.client, self.d, journal=self.recording.journal, **kwargs)
+        player = ProfilePlayer(self.client, self.d, journal=self._journal, **kwargs)
         if player_out is not None:
             player_out.append(player)
         try:
@@ -479,8 +485,9 @@ class Station:
         return profile
 
     # ------------------------------------------------------------------ helpers
-    def _link_drops(self) -> int:
-        return link_drops(self.client)
+    def _journal(self, kind: str, record: dict, blob: bytes = b"") -> None:
+        """Journal entries of the verbs: the owner's recording (attach(journal=...)), else ours."""
+        (self._owner_journal or self.recording.journal)(kind, record, blob)
 
     def _check_running(self) -> None:
         if self.abort_event.is_set():
