@@ -111,6 +111,13 @@ class ReplaySource:
         """Call `callback(block)` for every replayed block (in the replay thread)."""
         self._subscribers.append(callback)
 
+    def unsubscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
+        """Stop calling `callback` (no error if it was not subscribed)."""
+        try:
+            self._subscribers.remove(callback)
+        except ValueError:
+            pass
+
     def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
         """Call `callback(state, message)`: 'finished', 'up', 'lost', 'closed'."""
         self._listeners.append(callback)

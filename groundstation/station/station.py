@@ -40,9 +40,11 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from ..clock import ScriptAborted, SteppedClock, WallClock
+from ..contracts import BaseMotionInstrument
 from ..dictionary import Dictionary, load_dictionary
 from ..errors import GroundStationError
 from ..link import open_client
+from ..link.client import DeviceClient
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
 from .recording import RecordingSlot
@@ -88,10 +90,11 @@ class Station:
         self.testbed = load_testbed(self.testbed_path)
         self.abort_event = threading.Event()
         self.state = DeviceStateTracker()
-        self.client = None
+        #: the device link: a CommandChannel and a TelemetrySource (contracts.py)
+        self.client: DeviceClient | None = None
         self.address = ""
         self.clock: WallClock | SteppedClock | None = None
-        self.generator = None
+        self.generator: BaseMotionInstrument | None = None
         self.recording = RecordingSlot(self.echo)
         self.last_upload = None
         self._device = None          # in-process SimulatedDevice (fast)
