@@ -7,8 +7,10 @@ Errors in the files raise DictionaryError naming the file, the packet/command an
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
+import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -482,6 +484,10 @@ def load_dictionary(protocol_dir: str | Path | None = None) -> Dictionary:
     sync = _require(frame, "sync", f"{tpath}: [frame]", int)
     if sync != 0xEB90:
         raise DictionaryError(f"{tpath}: [frame] sync must be 0xEB90 (SPEC.md fixes the framing)")
+    control_rate = float(_require(proto, "control_rate_hz", f"{tpath}: [protocol]", (int, float)))
+    if not (math.isfinite(control_rate) and control_rate > 0):
+        raise DictionaryError(f"{tpath}: [protocol] control_rate_hz must be a positive number, "
+                              f"got {control_rate!r}")
     max_payload = int(frame.get("max_payload_bytes", 1024))
     packets = _parse_packets(tlm, tpath)
     for p in packets:
@@ -492,7 +498,7 @@ def load_dictionary(protocol_dir: str | Path | None = None) -> Dictionary:
     return Dictionary(
         name=str(proto.get("name", "")), version_major=major,
         version_minor=int(proto.get("version_minor", 0)),
-        control_rate_hz=float(proto.get("control_rate_hz", 1200)),
+        control_rate_hz=control_rate,
         sync=sync, max_payload=max_payload, packets=packets, commands=commands,
         parameters=_parse_parameters(par, base / "parameters.toml"),
         error_codes=dict(cmd.get("error_codes", {})),
@@ -501,3 +507,14 @@ def load_dictionary(protocol_dir: str | Path | None = None) -> Dictionary:
         hash=dictionary_hash({"telemetry": tlm, "commands": cmd, "parameters": par}),
         source_texts={"telemetry.toml": tlm_text, "commands.toml": cmd_text,
                       "parameters.toml": par_text})
+
+
+@functools.cache
+def default_control_rate_hz() -> float:
+    """The controller's rate (control periods, device ticks, profile samples per second):
+    `[protocol] control_rate_hz` of the dictionary `load_dictionary()` reads, loaded once.
+
+    The one source of the rate for code that has no Dictionary at hand: module constants
+    (params.tf_algebra.CONTROL_RATE_HZ, profiles.waveforms.RATE_HZ) and default
+    arguments take it from here, never from a literal."""
+    return load_dictionary().control_rate_hz

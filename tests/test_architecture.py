@@ -123,3 +123,25 @@ def test_the_command_line_starts_without_the_heavy_libraries():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()
     assert out == "[]", f"imported at start-up: {out}"
+
+
+#: modules still holding a literal control rate, owned by other work in progress; each
+#: entry goes when its module takes the rate from the dictionary
+_RATE_LITERAL_PENDING = {"cli_profile.py"}
+
+
+def test_the_control_rate_is_not_a_literal():
+    """The controller's rate (1200 Hz) lives in protocol/telemetry.toml
+    (`[protocol] control_rate_hz`): code takes it from a Dictionary or from
+    dictionary.default_control_rate_hz(), never from a number 1200 written in the code.
+    Comments and docstrings may say "1200 Hz" (they are not numbers in the syntax tree)."""
+    offenders = []
+    for path in sorted(PKG.rglob("*.py")):
+        name = str(path.relative_to(PKG))
+        if name in _RATE_LITERAL_PENDING:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if (isinstance(node, ast.Constant) and type(node.value) in (int, float)
+                    and node.value == 1200):
+                offenders.append(f"{name}:{node.lineno}")
+    assert not offenders, f"literal control rate 1200 in code: {offenders}"

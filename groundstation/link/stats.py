@@ -21,6 +21,7 @@ import numpy as np
 
 from ..codec import FramingCounters, TelemetryBlock
 from ..codec.sequence import SEQ_MOD, SequenceTracker
+from ..dictionary import default_control_rate_hz
 
 
 class ClockSync:
@@ -123,7 +124,9 @@ class LinkSnapshot:
 class LinkStatistics:
     """Fed with every decoded block (receiver threads); read by anyone (thread-safe)."""
 
-    def __init__(self, tick_rate_hz: float = 1200.0, rate_window_s: float = 1.0):
+    def __init__(self, tick_rate_hz: float | None = None, rate_window_s: float = 1.0):
+        if tick_rate_hz is None:                   # the protocol dictionary's control rate
+            tick_rate_hz = default_control_rate_hz()
         self.clock = ClockSync(tick_rate_hz)
         self._tick_rate = tick_rate_hz
         self._lock = threading.Lock()

@@ -30,6 +30,7 @@ from typing import Any, Iterable
 import h5py
 import numpy as np
 
+from ..dictionary import default_control_rate_hz
 from . import schema
 from .channels import HEADER_CHANNELS, Channel, packet_channels
 from .channels import to_engineering as _to_engineering
@@ -198,7 +199,8 @@ class LogReader:
 
     @property
     def tick_rate_hz(self) -> float:
-        return float(self._f.attrs.get("tick_rate_hz", 1200.0))
+        # a log written before the attribute existed: the protocol dictionary's rate
+        return float(self._f.attrs.get("tick_rate_hz", default_control_rate_hz()))
 
     # ------------------------------------------------------------------ packets and channels
     @_guard

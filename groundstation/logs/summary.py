@@ -17,6 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..codec.sequence import SequenceTracker
+from ..dictionary import default_control_rate_hz
 from .opening import attr_text
 
 if TYPE_CHECKING:
@@ -171,7 +172,7 @@ def summarize(r: "LogReader") -> LogInfo:
         software_version=attr_text(a.get("software_version", "")), host=attr_text(a.get("host", "")),
         user=attr_text(a.get("user", "")), protocol_version=attr_text(a.get("protocol_version", "")),
         dictionary_hash=attr_text(a.get("dictionary_hash", "")),
-        tick_rate_hz=float(a.get("tick_rate_hz", 1200.0)), packets=packets)
+        tick_rate_hz=float(a.get("tick_rate_hz", default_control_rate_hz())), packets=packets)
 
 
 __all__ = ["LogInfo", "PacketSummary", "scan_sequence", "summarize"]

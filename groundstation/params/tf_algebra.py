@@ -16,12 +16,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..dictionary import default_control_rate_hz
 from ..errors import GroundStationError
 
 if TYPE_CHECKING:
     from .design_file import ControllerDesign
 
-CONTROL_RATE_HZ = 1200.0          # the controller's loop rate (reference §2)
+CONTROL_RATE_HZ = default_control_rate_hz()   # the controller's loop rate (reference §2)
 CANCEL_TOLERANCE = 1e-6           # relative distance at which a pole and a zero cancel
 INTEGRATOR_TOLERANCE = 1e-9       # rad/s: a pole closer to s = 0 than this is an integrator
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
+from ..dictionary import default_control_rate_hz
 from .testbed import Testbed
 
 N_STATE = 8
@@ -85,7 +86,11 @@ def discretise(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.n
     return E[:n, :n].copy(), E[:n, n:].copy()
 
 
-def discrete_model(tb: Testbed, control_rate_hz: float = 1200.0) -> DiscreteModel:
+def discrete_model(tb: Testbed, control_rate_hz: float | None = None) -> DiscreteModel:
+    """The testbed's model discretised for tb.substeps steps per control period
+    (control_rate_hz None: the protocol dictionary's rate)."""
+    if control_rate_hz is None:
+        control_rate_hz = default_control_rate_hz()
     h = 1.0 / (control_rate_hz * tb.substeps)
     Ad, Bd = discretise(*continuous_model(tb), h)
     if not np.all(np.isfinite(Ad)) or np.max(np.abs(np.linalg.eigvals(Ad))) > 1.0 + 1e-12:

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from .samples import Profile
+from .samples import RATE_HZ, Profile
 
 
 def preview(profile: Profile, nperseg: int = 16384) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -41,13 +41,14 @@ class ProfileSummary:
     max_accel: float                 # units/s²
     peak_frequency_hz: float         # strongest PSD bin above DC
     crc: int
+    rate_hz: float = RATE_HZ         # samples per second as played
 
     def lines(self) -> list[str]:
         u = self.units
         return [
             f"profile:  {self.name}",
             f"target:   {self.target} ({u}, origin {self.origin})",
-            f"duration: {self.duration_s:g} s = {self.sample_count} samples at 1200 Hz",
+            f"duration: {self.duration_s:g} s = {self.sample_count} samples at {self.rate_hz:g} Hz",
             f"range:    min {self.minimum:.6g} {u}, max {self.maximum:.6g} {u}, RMS {self.rms:.6g} {u}",
             f"rates:    max |slope| {self.max_slope:.6g} {u}/s, max |2nd derivative| "
             f"{self.max_accel:.6g} {u}/s²",
@@ -68,7 +69,7 @@ def summarise(profile: Profile) -> ProfileSummary:
         minimum=float(x.min()), maximum=float(x.max()), rms=float(np.sqrt(np.mean(x ** 2))),
         max_slope=float(np.abs(d1).max()) if d1.size else 0.0,
         max_accel=float(np.abs(d2).max()) if d2.size else 0.0,
-        peak_frequency_hz=peak, crc=profile.crc())
+        peak_frequency_hz=peak, crc=profile.crc(), rate_hz=profile.rate)
 
 
 def write_csv(profile: Profile, path: str | Path) -> None:

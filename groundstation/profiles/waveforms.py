@@ -26,9 +26,11 @@ from typing import Sequence
 import numpy as np
 from scipy import signal
 
+from ..dictionary import default_control_rate_hz
 from ..errors import GroundStationError
 
-RATE_HZ = 1200.0
+#: the controller's rate, one sample per control period (the protocol dictionary's)
+RATE_HZ = default_control_rate_hz()
 
 STEP_SHAPES = ("raised_cosine", "minimum_jerk", "raw")
 SWEEP_METHODS = ("logarithmic", "linear")
@@ -147,13 +149,13 @@ def velocity_profile(segments: Sequence[tuple[float, float]], blend_s: float,
     return x
 
 
-def _pad(x: np.ndarray, n: int | None, what: str) -> np.ndarray:
+def _pad(x: np.ndarray, n: int | None, what: str, rate: float = RATE_HZ) -> np.ndarray:
     """Hold the last value up to n samples (n = None: as generated)."""
     if n is None or n == len(x):
         return x
     if n < len(x):
         raise GeneratorError(f"duration_s is too short: the {what} needs {len(x)} samples "
-                             f"({len(x) / RATE_HZ:g} s at 1200 Hz), the profile has {n}")
+                             f"({len(x) / rate:g} s at {rate:g} Hz), the profile has {n}")
     return np.concatenate([x, np.full(n - len(x), x[-1])])
 
 
@@ -195,7 +197,7 @@ def ramp(level: float, ramp_time_s: float, *, hold_s: float = 0.0, t_start_s: fl
     if back:
         segs.append((ramp_time_s, -slope))
     x = velocity_profile(segs, blend_s, rate, end_value=0.0 if back else level)
-    return _pad(x, None if duration_s is None else samples_for(duration_s, rate), "ramp")
+    return _pad(x, None if duration_s is None else samples_for(duration_s, rate), "ramp", rate)
 
 
 def triangle(amplitude: float, velocity: float, *, cycles: int = 1, turnaround_s: float = 0.5,
@@ -210,7 +212,7 @@ def triangle(amplitude: float, velocity: float, *, cycles: int = 1, turnaround_s
     segs = [(leg, v)] + [(2 * leg, v if j % 2 == 0 else -v) for j in range(1, 2 * int(cycles))] \
         + [(leg, v)]
     x = velocity_profile(segs, turnaround_s, rate, end_value=0.0)
-    return _pad(x, None if duration_s is None else samples_for(duration_s, rate), "triangle")
+    return _pad(x, None if duration_s is None else samples_for(duration_s, rate), "triangle", rate)
 
 
 def constant_velocity(velocity: float, stroke: float, *, accel_s: float = 0.2,
@@ -236,7 +238,7 @@ def constant_velocity(velocity: float, stroke: float, *, accel_s: float = 0.2,
     segs += [(pass_s / 2, v)]
     x = velocity_profile(segs, accel_s, rate, end_value=0.0)
     return _pad(x, None if duration_s is None else samples_for(duration_s, rate),
-                "constant-velocity motion")
+                "constant-velocity motion", rate)
 
 
 # ----------------------------------------------------------------------------- oscillations

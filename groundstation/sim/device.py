@@ -26,7 +26,17 @@ from ..plant.testbed import Testbed
 
 log = logging.getLogger(__name__)
 
-HOUSEKEEPING_DIVIDER = 120          # 1200 Hz / 120 = 10 Hz
+
+def housekeeping_divider(dictionary: Dictionary) -> int:
+    """Control periods per HOUSEKEEPING frame: the dictionary's control rate over the
+    packet's rate_hz (1200 Hz / 10 Hz = 120)."""
+    rate = dictionary.packet("HOUSEKEEPING").rate_hz
+    ratio = dictionary.control_rate_hz / rate if rate else 0.0
+    divider = round(ratio)
+    if divider < 1 or abs(ratio - divider) > 1e-9:
+        raise ValueError(f"HOUSEKEEPING rate_hz = {rate!r} does not divide the control rate "
+                         f"{dictionary.control_rate_hz:g} Hz into whole control periods")
+    return divider
 
 
 class _Connection:
@@ -61,6 +71,8 @@ class SimulatedDevice:
         self.dictionary = dictionary or load_dictionary()
         self.codec = FrameCodec(self.dictionary)
         self.firmware = firmware or Firmware(self.dictionary, seed=seed, testbed=testbed)
+        #: control periods per HOUSEKEEPING frame (the dictionary's rates)
+        self.housekeeping_divider = housekeeping_divider(self.dictionary)
         self.host = host
         self.pacing = pacing
         #: realtime pacing only: control periods per 1/1200 s of wall time (10: a 10x
@@ -296,12 +308,13 @@ class SimulatedDevice:
         The batch is cut at housekeeping boundaries so each HOUSEKEEPING frame carries
         the state of its own tick: batch sizes never change what is sent."""
         fw = self.firmware
+        every = self.housekeeping_divider
         hr = self.dictionary.packet("HIGH_RATE")
         frames: list[bytes] = []
         hk_frames: list[bytes] = []
         done = 0
         while done < n:
-            step = min(n - done, HOUSEKEEPING_DIVIDER - fw.tick % HOUSEKEEPING_DIVIDER)
+            step = min(n - done, every - fw.tick % every)
             first_tick = fw.tick + 1
             v_fg = self.base_drive(first_tick, step) if self.base_drive is not None else None
             cols, truth = fw.run(step, v_fg)
@@ -313,16 +326,20 @@ class SimulatedDevice:
                                      np.arange(first_tick, first_tick + step))
             size = len(data) // step
             frames += [data[i * size:(i + 1) * size] for i in range(step)]
-            if fw.tick % HOUSEKEEPING_DIVIDER == 0:
+            if fw.tick % every == 0:
                 hk_frames.append(self.codec.encode(
                     "HOUSEKEEPING", fw.housekeeping(), [self._next_seq("HOUSEKEEPING")], [fw.tick]))
             done += step
         return frames, hk_frames
 
-    def run_fast(self, seconds: float, consumer: Callable[[bytes], None], batch: int = 1200) -> int:
+    def run_fast(self, seconds: float, consumer: Callable[[bytes], None],
+                 batch: int | None = None) -> int:
         """Run `seconds` of simulated time as fast as possible, handing the frames (the
-        exact bytes paced mode would stream, in order) to `consumer`; returns periods run."""
+        exact bytes paced mode would stream, in order) to `consumer`, `batch` control
+        periods at a time (None: one second's worth); returns periods run."""
         total = int(round(seconds * self.dictionary.control_rate_hz))
+        if batch is None:
+            batch = max(1, int(round(self.dictionary.control_rate_hz)))
         done = 0
         while done < total:
             n = min(batch, total - done)
@@ -357,7 +374,7 @@ class SimulatedDevice:
         self._ticks_done = 0
         while not self._stop.is_set():
             if self.pacing == "fast":
-                self.run_ticks(120)
+                self.run_ticks(self.housekeeping_divider)    # one housekeeping period
                 continue
             self._catch_up()
             # sleep to the next control period's start, so frames leave on time

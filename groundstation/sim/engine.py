@@ -13,6 +13,7 @@ import numpy as np
 
 from . import core
 from . import friction as fr
+from ..dictionary import default_control_rate_hz
 from ..plant.model import discrete_model
 from ..plant.testbed import Testbed
 
@@ -26,7 +27,10 @@ class Engine:
     """Plant + sensors + firmware control law of one simulated testbed."""
 
     def __init__(self, testbed: Testbed, params: dict[str, Any], *, seed: int = 0,
-                 control_rate_hz: float = 1200.0):
+                 control_rate_hz: float | None = None):
+        """control_rate_hz: the firmware's loop rate (None: the protocol dictionary's)."""
+        if control_rate_hz is None:
+            control_rate_hz = default_control_rate_hz()
         self.testbed = testbed
         self.rate = control_rate_hz
         self.model = discrete_model(testbed, control_rate_hz)

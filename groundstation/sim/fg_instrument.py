@@ -48,6 +48,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..dictionary import default_control_rate_hz
 from ..instruments import spec4050 as spec
 
 # the logger the instrument has always logged under (before the split into modules)
@@ -119,12 +120,14 @@ class SimulatedGenerator:
     (the SCPI server thread and the device's tick loop share one lock)."""
 
     def __init__(self, *, tick_source: Callable[[], int] | None = None,
-                 control_rate_hz: float = 1200.0, base_channel: int = 1,
+                 control_rate_hz: float | None = None, base_channel: int = 1,
                  serial: str = "SIM0000001", firmware: str = "sim-1.0"):
         if base_channel not in spec.CHANNELS:
             raise ValueError(f"base_channel must be one of {spec.CHANNELS}")
         self._tick_source = tick_source or (lambda: 0)
-        self.rate_hz = float(control_rate_hz)
+        #: the device's tick rate (None given: the protocol dictionary's)
+        self.rate_hz = float(control_rate_hz if control_rate_hz is not None
+                             else default_control_rate_hz())
         self.base_channel = base_channel
         self.identity = f"{spec.MAKER},{spec.MODEL},{serial},{firmware}"
         self.lock = threading.Lock()
