@@ -19,152 +19,37 @@ Safety:
 
 What was done is journaled in the recording (kind "function_generator"), so a log says
 which waveform moved the base and when.
+
+The parts without Qt live in modules of their own, and every name is still importable
+from here: `fg_jobs` (the worker thread and its queue), `fg_records` (what the controller
+reports), `fg_limits_text` (the allowed ranges as the panel shows them) and
+`fg_motion_check` (the achieved base motion against its target, from the telemetry).
 """
 
 from __future__ import annotations
 
-import itertools
 import logging
-import queue
 import threading
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 from typing import Callable
 
 from PySide6.QtCore import QObject, Signal
 
-from ..basemotion import (BandRms, BaseMotionCheck, BaseMotionError, BaseMotionProfile,
-                          BaseStageModel, PsdTable, RecordWindow, band_rms, check_record,
-                          load_psd, make_profile)
+from ..basemotion import BaseMotionProfile, BaseStageModel, PsdTable, load_psd, make_profile
 from ..errors import GroundStationError
-from ..instruments import (ArbSelection, ArbUpload, BasicWave, FunctionGenerator4050,
-                           InstrumentLinkError, OutputState, SafetyLimits, SettingRefusedError,
-                           list_resources, open_generator)
-from ..instruments import spec4050 as spec
+from ..instruments import (BasicWave, FunctionGenerator4050, InstrumentLinkError, SafetyLimits,
+                           SettingRefusedError, list_resources, open_generator)
 from ..plant.testbed import DEFAULT_TESTBED, Testbed, load_testbed
+from .fg_jobs import JobQueue
+from .fg_limits_text import limit_texts, limits_source
+from .fg_motion_check import check_uploaded_motion, newest_device_time
+from .fg_records import (DEFAULT_TOLERANCE, SIMULATOR, CheckResult, GeneratorState,
+                         ResourceChoice, UploadedProfile, _arb_name)
 
 log = logging.getLogger(__name__)
 
-SIMULATOR = "simulator"              # what the resource picker calls the simulated generator
-DEFAULT_TOLERANCE = 0.10             # achieved RMS within 10 % of the target
 SHUTDOWN_TIMEOUT_S = 10.0
-
-
-class _Cancelled(Exception):
-    """An abort came while the job waited or between two of its steps."""
-
-
-@dataclass(frozen=True)
-class ResourceChoice:
-    resource: str                    # the VISA address
-    label: str                       # what the picker shows
-    simulated: bool = False
-
-
-@dataclass(frozen=True)
-class GeneratorState:
-    """One channel as the instrument reports it."""
-
-    resource: str
-    channel: int
-    wave: BasicWave
-    output: OutputState
-    arb: ArbSelection | None
-    #: why switching the output on would be refused with these settings ("" if allowed)
-    refusal: str = ""
-
-    def text(self) -> str:
-        w, o = self.wave, self.output
-        parts = [w.waveform]
-        for label, value, unit in (("f", w.frequency_hz, "Hz"), ("amp", w.amplitude_vpp, "Vpp"),
-                                   ("offset", w.offset_v, "V"), ("phase", w.phase_deg, "deg")):
-            if value is not None:
-                parts.append(f"{label} {value:g} {unit}")
-        if w.waveform == "ARB" and self.arb is not None:
-            parts.append(f"arb {self.arb.name or self.arb.index}")
-        load = {"HZ": "high-Z", "50": "50 ohm", None: "load ?"}[o.load]
-        return f"C{self.channel}: {', '.join(parts)}; output {'ON' if o.on else 'off'} ({load})"
-
-
-@dataclass(frozen=True)
-class UploadedProfile:
-    channel: int
-    profile: BaseMotionProfile
-    upload: ArbUpload
-
-
-@dataclass(frozen=True)
-class CheckResult:
-    """Achieved vs target for the last uploaded profile."""
-
-    check: BaseMotionCheck
-    window: RecordWindow
-    bands: list[BandRms]
-    tolerance: float
-
-    @property
-    def ok(self) -> bool:
-        return self.check.within(self.tolerance)
-
-    def headline(self) -> str:
-        c = self.check
-        return (f"{c.name}: {c.achieved_rms_rad * 1e3:.3f} mrad achieved vs {c.target_rms_rad * 1e3:.3f} "
-                f"target ({c.rms_error * 100:+.1f} %) - "
-                f"{'within' if self.ok else 'NOT within'} {self.tolerance * 100:g} %")
-
-    def text(self) -> str:
-        c = self.check
-        verdict = (f"within {self.tolerance * 100:g} %" if self.ok
-                   else f"NOT within {self.tolerance * 100:g} %")
-        dmax, fmax = c.max_cumulative_rms_difference_rad
-        bands = ", ".join(f"{b.low_hz:g}-{b.high_hz:g} Hz {b.achieved_rms_rad * 1e3:.2f}/"
-                          f"{b.target_rms_rad * 1e3:.2f}" for b in self.bands)
-        missing = (f"; {self.window.missing_frames} telemetry frames missing"
-                   if self.window.missing_frames else "")
-        return (f"{c.name}: base RMS achieved {c.achieved_rms_rad * 1e3:.3f} mrad vs target "
-                f"{c.target_rms_rad * 1e3:.3f} mrad ({c.rms_error * 100:+.1f} %, {verdict}); "
-                f"{c.in_band_fraction * 100:.1f} % of the power in {c.band_hz[0]:g}-"
-                f"{c.band_hz[1]:g} Hz; largest cumulative-RMS difference {dmax * 1e3:.3f} mrad at "
-                f"{fmax:.3g} Hz; per band achieved/target mrad: {bands}; device time "
-                f"{self.window.start_s:.2f}-{self.window.end_s:.2f} s{missing}")
-
-
-def limit_texts(waveform: str, load: str | None, limits: SafetyLimits | None) -> dict[str, str]:
-    """The allowed range of each setting, short enough to sit next to its field: the
-    instrument's range for the load from its limits table (`spec4050.LIMITS`, the rows the
-    driver checks), then the testbed's safety limit (volts at the amplifier, expressed as
-    the setting that gives them).  Keys: frequency, amplitude, offset (with the envelope
-    |offset| + amplitude/2 where it applies), phase, points (uploads)."""
-    load_known = load if load in spec.LOADS else "50"     # unknown: the one that doubles
-    lname = "high-Z" if load_known == "HZ" else "50 ohm"
-    unused = "not used by " + waveform
-
-    def where(row: spec.Limit) -> str:
-        return f" ({spec.MODEL}, {lname})" if row.depends_on_load else f" ({spec.MODEL})"
-
-    out = {}
-    for key in ("frequency", "amplitude", "phase", "points", "offset"):
-        row = spec.limit_for(key, waveform)
-        out[key] = row.range_text(load_known) + where(row) if row else unused
-    envelope = spec.limit_for("envelope", waveform)
-    if envelope is not None:                 # amplitude and offset share the output swing
-        offset = spec.limit_for("offset", waveform)
-        out["offset"] = (f"{offset.range_text(load_known)}; |offset| + amplitude/2 "
-                         f"{envelope.range_text(load_known)}{where(envelope)}")
-    if limits is not None:
-        # a 50 ohm setting puts twice the setting on the amplifier: the setting may be half
-        k = 0.5 if load_known == "50" else 1.0
-        if spec.limit_for("amplitude", waveform):
-            out["amplitude"] += f"\ntestbed: ≤ {limits.max_amplitude_vpp * k:g} Vpp"
-        out["offset"] += f"\ntestbed: ±{limits.max_offset_v * k:g} V"
-    return out
-
-
-def limits_source(limits: SafetyLimits | None) -> str:
-    """'inertial_2dof.toml' from a SafetyLimits' source ('<path> [limits]')."""
-    if limits is None:
-        return "no testbed"
-    return Path(limits.source.split(" [")[0]).name
 
 
 class GeneratorController(QObject):
@@ -200,15 +85,12 @@ class GeneratorController(QObject):
         #: whether the motion since motion_start_s is the uploaded profile playing
         self.motion_plays_upload = False
         self._testbeds: dict[str, Testbed] = {}
-        self._queue: queue.PriorityQueue = queue.PriorityQueue()
-        self._order = itertools.count()
-        self._lock = threading.Lock()
-        self._epoch = 0                      # incremented by every abort
-        self._closing = False
-        self._worker: threading.Thread | None = None
+        self._jobs = JobQueue(busy=lambda action: self.sig_busy.emit(action),
+                              info=lambda text: self.sig_info.emit(text),
+                              failed=lambda action, text: self.sig_failed.emit(action, text))
+        self._lock = self._jobs.lock          # the resource listing's state too
         self._lister: threading.Thread | None = None
         self._relist = False
-        self._pending = 0                    # jobs queued or under way
 
     # ------------------------------------------------------------------ testbed and limits
     def testbed(self) -> Testbed:
@@ -258,7 +140,7 @@ class GeneratorController(QObject):
     def _list_work(self) -> None:
         while True:
             with self._lock:
-                if not self._relist or self._closing:
+                if not self._relist or self._jobs.closing:
                     self._lister = None
                     return
                 self._relist = False
@@ -281,69 +163,10 @@ class GeneratorController(QObject):
             return sim
         return text
 
-    # ------------------------------------------------------------------ the worker
-    def _submit(self, action: str, job: Callable[[int], None]) -> None:
-        with self._lock:
-            if self._closing:
-                return
-            self._put((1, next(self._order), self._epoch, action, job))
-            self._ensure_worker()
-
-    def _put(self, item: tuple) -> None:
-        """Queue a job (caller holds self._lock); counted until it has run or been dropped."""
-        if item[4] is not None:
-            self._pending += 1
-        self._queue.put(item)
-
+    # ------------------------------------------------------------------ the worker (fg_jobs)
     def idle(self) -> bool:
         """Nothing queued and nothing under way (for scripts and tests)."""
-        with self._lock:
-            return self._pending == 0
-
-    def _ensure_worker(self) -> None:
-        if self._worker is None or not self._worker.is_alive():
-            self._worker = threading.Thread(target=self._run, name="gs-fg", daemon=True)
-            self._worker.start()
-
-    def _run(self) -> None:
-        while True:
-            priority, _, epoch, action, job = self._queue.get()
-            if job is None:
-                return
-            try:
-                if priority > 0 and epoch != self._epoch:
-                    log.info("generator: %s dropped (aborted before it started)", action)
-                    continue
-                self.sig_busy.emit(action)
-                try:
-                    job(epoch)
-                except _Cancelled:
-                    self.sig_info.emit(f"{action} stopped by the abort")
-                except GroundStationError as exc:
-                    self.sig_failed.emit(action, str(exc))
-                except Exception as exc:   # a backend's own exception: report, keep serving
-                    log.exception("generator job %s", action)
-                    self.sig_failed.emit(action, f"{type(exc).__name__}: {exc}")
-                finally:
-                    self.sig_busy.emit("")
-            finally:
-                with self._lock:
-                    self._pending -= 1
-
-    def _guard(self, epoch: int) -> None:
-        """Between the steps of a job: stop if an abort came meanwhile."""
-        if epoch != self._epoch:
-            raise _Cancelled()
-
-    def _drain(self) -> None:
-        """Drop every job not started yet (caller holds self._lock)."""
-        while True:
-            try:
-                item = self._queue.get_nowait()
-            except queue.Empty:
-                return
-            if item[4] is not None:
-                self._pending -= 1
+        return self._jobs.idle()
 
     def _require(self) -> FunctionGenerator4050:
         fg = self.fg
@@ -361,11 +184,7 @@ class GeneratorController(QObject):
 
     # ------------------------------------------------------------------ state read-back
     def _newest_device_time(self) -> float | None:
-        try:
-            snap = self.session.store.ring("HIGH_RATE").snapshot([], seconds=0.0)
-        except (AttributeError, KeyError):
-            return None
-        return float(snap.device_time[-1]) if len(snap.device_time) else None
+        return newest_device_time(self.session)
 
     def _read_state(self, channel: int, *, motion_changed: bool = False,
                     before: float | None = None) -> GeneratorState:
@@ -421,7 +240,7 @@ class GeneratorController(QObject):
             self._record("open", {"identity": str(fg.identity), "limits": asdict(limits)})
             self.sig_opened.emit(address, str(fg.identity))
             self._read_state(1)
-        self._submit("open", job)
+        self._jobs.submit("open", job)
 
     def _close_now(self) -> None:
         fg, self.fg = self.fg, None
@@ -437,7 +256,7 @@ class GeneratorController(QObject):
 
     def close(self) -> None:
         """Outputs off and the session closed (queued: after what was asked before)."""
-        self._submit("close", lambda epoch: self._close_now())
+        self._jobs.submit("close", lambda epoch: self._close_now())
 
     @property
     def is_open(self) -> bool:
@@ -484,7 +303,7 @@ class GeneratorController(QObject):
                                    "device_time": self._newest_device_time()})
             state = self._read_state(channel, motion_changed=True)
             self.sig_info.emit(f"applied: {state.text()}")
-        self._submit("apply", job)
+        self._jobs.submit("apply", job)
         return None
 
     def set_output(self, channel: int, on: bool) -> str | None:
@@ -503,18 +322,18 @@ class GeneratorController(QObject):
         def job(epoch):
             fg = self._require()
             if on:
-                self._guard(epoch)
+                self._jobs.guard(epoch)
             before = self._newest_device_time()
             fg.set_output(channel, on)
             state = self._read_state(channel, before=before)
             self._record("output", {"channel": channel, "on": state.output.on,
                                     "device_time": before if not on else self._newest_device_time()})
-        self._submit("output on" if on else "output off", job)
+        self._jobs.submit("output on" if on else "output off", job)
         return None
 
     def refresh(self, channel: int) -> None:
         """Read a channel back (the front panel may have changed it)."""
-        self._submit("read back", lambda epoch: self._read_state(channel))
+        self._jobs.submit("read back", lambda epoch: self._read_state(channel))
 
     def upload_profile(self, channel: int, profile: BaseMotionProfile,
                        name: str | None = None) -> str | None:
@@ -530,7 +349,7 @@ class GeneratorController(QObject):
 
         def job(epoch):
             fg = self._require()
-            self._guard(epoch)
+            self._jobs.guard(epoch)
             up = fg.upload_arbitrary(channel, profile.volts, name=arb_name,
                                      frequency_hz=profile.frequency_hz)
             self.uploaded = UploadedProfile(channel, profile, up)
@@ -553,54 +372,36 @@ class GeneratorController(QObject):
             self._read_state(channel, motion_changed=True)
             self.sig_info.emit(f"uploaded {arb_name}: {up.points} points at "
                                f"{up.frequency_hz:.6g} Hz, {up.amplitude_vpp:.3f} Vpp")
-        self._submit("upload", job)
+        self._jobs.submit("upload", job)
         return None
 
     # ------------------------------------------------------------------ abort and shutdown
     def abort(self) -> None:
         """Both outputs off, from any state, without waiting for anything queued.  Returns
         at once; the read-back arrives as sig_state."""
-        with self._lock:
-            self._epoch += 1
-            self._drain()
-            if self._closing:
-                return
-            channel = self.state.channel if self.state is not None else 1
+        channel = self.state.channel if self.state is not None else 1
 
-            def job(epoch):
-                fg = self.fg
-                if fg is None or fg.closed:   # nothing to switch off: nothing to say
-                    log.debug("abort: no function generator open")
-                    return
-                before = self._newest_device_time()
-                try:
-                    fg.abort()
-                except GroundStationError as exc:
-                    self.sig_failed.emit("abort", f"the outputs may still be ON: {exc}")
-                    return
-                self._record("abort", {"device_time": before})
-                state = self._read_state(channel, before=before)
-                self.sig_info.emit(f"abort: outputs off ({state.text()})")
-            self._put((0, next(self._order), self._epoch, "abort", job))
-            self._ensure_worker()
+        def job(epoch):
+            fg = self.fg
+            if fg is None or fg.closed:       # nothing to switch off: nothing to say
+                log.debug("abort: no function generator open")
+                return
+            before = self._newest_device_time()
+            try:
+                fg.abort()
+            except GroundStationError as exc:
+                self.sig_failed.emit("abort", f"the outputs may still be ON: {exc}")
+                return
+            self._record("abort", {"device_time": before})
+            state = self._read_state(channel, before=before)
+            self.sig_info.emit(f"abort: outputs off ({state.text()})")
+        self._jobs.preempt("abort", job)
 
     def shutdown(self, timeout: float = SHUTDOWN_TIMEOUT_S) -> None:
         """Outputs off and the session closed before returning (bounded by `timeout` and
         the VISA timeout).  For the window closing and the simulator stopping."""
         self.blockSignals(True)               # the widgets that would hear are going
-        with self._lock:
-            self._closing = True
-            self._epoch += 1
-            self._drain()
-            worker = self._worker
-            if worker is not None and worker.is_alive():
-                self._put((0, next(self._order), self._epoch, "close",
-                                 lambda epoch: self._close_now()))
-                self._put((9, next(self._order), self._epoch, "stop", None))
-        if worker is not None:
-            worker.join(timeout)
-            if worker.is_alive():
-                log.error("generator: the worker did not finish within %g s", timeout)
+        self._jobs.close("close", lambda epoch: self._close_now(), timeout)
         lister = self._lister
         if lister is not None:                # never leave a listing running into teardown
             lister.join(timeout)
@@ -621,11 +422,8 @@ class GeneratorController(QObject):
                 self._close_now()
             finally:
                 done.set()
-        with self._lock:
-            self._epoch += 1                  # nothing queued for it may run any more
-            self._drain()
-            self._put((0, next(self._order), self._epoch, "close", job))
-            self._ensure_worker()
+        # nothing queued for it may run any more
+        self._jobs.preempt("close", job, even_closing=True)
         if not done.wait(timeout):
             log.error("generator: closing %s did not finish within %g s", sim, timeout)
 
@@ -636,45 +434,16 @@ class GeneratorController(QObject):
         uploaded profile (from the session's telemetry store) against its target.
         BaseMotionError says what is missing (no upload, output never on, not enough data)."""
         up = self.uploaded
-        if up is None:
-            raise BaseMotionError("no base-motion profile was uploaded from here: upload one, "
-                                  "switch the output on and let it play")
-        if self.motion_start_s is None:
-            raise BaseMotionError(f"the output has not been on since {up.profile.name} was "
-                                  f"uploaded: switch it on and let it play")
-        if not self.motion_plays_upload:
-            raise BaseMotionError(f"the base did not move under {up.upload.name} the last time "
-                                  f"the output was on (another waveform was set): upload "
-                                  f"{up.profile.name} again, switch the output on and let it play")
-        profile = up.profile
-        settle = profile.stage.settling_time_s()
-        not_before = self.motion_start_s + settle
         s = self.state
-        running = s is not None and s.output.on
-        end = None if running else self.motion_end_s
-        ring = self.session.store.ring("HIGH_RATE")
-        newest = self._newest_device_time()
-        if newest is None:
-            raise BaseMotionError("no telemetry received: connect to the testbed")
-        span = newest - self.motion_start_s + 1.0
-        snap = ring.snapshot(["encoder_base"], seconds=max(span, periods * profile.duration_s + 1.0))
-        rate = float(ring.packet.rate_hz or self.session.d.control_rate_hz)
-        check, window = check_record(snap.device_time, snap.values["encoder_base"], rate,
-                                     profile, end_s=end, not_before_s=not_before, periods=periods)
-        result = CheckResult(check, window, band_rms(check), tolerance)
-        self._record("check", {"profile": profile.name, "target_rms_rad": check.target_rms_rad,
+        result = check_uploaded_motion(self.session, up, self.motion_start_s, self.motion_end_s,
+                                       self.motion_plays_upload, s is not None and s.output.on,
+                                       tolerance, periods)
+        check, window = result.check, result.window
+        self._record("check", {"profile": up.profile.name, "target_rms_rad": check.target_rms_rad,
                                "achieved_rms_rad": check.achieved_rms_rad,
                                "window_s": [window.start_s, window.end_s],
                                "missing_frames": window.missing_frames, "ok": result.ok})
         return result
-
-
-def _arb_name(text: str) -> str:
-    """A name the instrument takes: a letter, then up to 15 letters, digits or '_'."""
-    name = "".join(ch if ch.isascii() and (ch.isalnum() or ch == "_") else "_" for ch in text)
-    if not name or not name[0].isalpha():
-        name = "BM_" + name
-    return name[:16]
 
 
 __all__ = ["CheckResult", "DEFAULT_TOLERANCE", "GeneratorController", "GeneratorState",
