@@ -22,8 +22,15 @@ import threading
 import time
 
 from . import __version__, cli_campaign, cli_fg, cli_logs, cli_params, cli_profile
-from .dictionary import load_dictionary
 from .errors import GroundStationError
+
+
+def load_dictionary(protocol_dir=None):
+    """The protocol dictionary, imported when a command needs it (numpy comes with it:
+    `groundstation --help` must not wait for that)."""
+    from .dictionary import load_dictionary as load
+
+    return load(protocol_dir)
 
 log = logging.getLogger("groundstation")
 

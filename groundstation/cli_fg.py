@@ -43,10 +43,12 @@ import signal
 import threading
 from contextlib import contextmanager
 from pathlib import Path
-
-import numpy as np
+from typing import TYPE_CHECKING
 
 from .errors import GroundStationError
+
+if TYPE_CHECKING:
+    import numpy as np
 
 SIM = "sim"
 DEFAULT_TOLERANCE = 0.10
@@ -205,6 +207,8 @@ class _BaseEncoder:
         self._lock = threading.Lock()
 
     def __call__(self, block) -> None:
+        import numpy as np
+
         if block.name != "HIGH_RATE" or not len(block):
             return
         t = self._unwrap.unwrap(block["tick"]) / self.rate
@@ -222,6 +226,8 @@ class _BaseEncoder:
             return float(self._t[-1][-1]) if self._t else None
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        import numpy as np
+
         with self._lock:
             if not self._t:
                 return np.zeros(0), np.zeros(0)
@@ -392,6 +398,8 @@ def _host_to_device(reader, host_time: float) -> float | None:
 
 
 def _cmd_check(args) -> int:
+    import numpy as np
+
     from .basemotion import check_record
     from .logs import LogReader
 

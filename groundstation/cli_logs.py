@@ -5,7 +5,6 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from .dictionary import load_dictionary
 from .errors import GroundStationError
 
 
@@ -18,6 +17,8 @@ link is reopened with back-off (1, 2, 4, 8, then every 10 s); the log records th
 
 
 def _cmd_record(args) -> int:
+    from .dictionary import load_dictionary
+
     from .link import format_snapshot
     from .logs import Recorder
     from .station.keeper import EXIT_REFUSED, LinkKeeper
@@ -109,6 +110,8 @@ def _check_testbed(client, testbed, rec) -> None:
 
 
 def _cmd_log(args) -> int:
+    from .dictionary import load_dictionary
+
     from .logs import LogReader
 
     if args.action == "check":
@@ -162,6 +165,8 @@ def _cmd_log(args) -> int:
 
 
 def _cmd_replay(args) -> int:
+    from .dictionary import load_dictionary
+
     from .gui.app import display_available
     from .link import format_snapshot
     from .logs import ReplaySource

@@ -135,15 +135,16 @@ def _upload_progress(step: str, fraction: float) -> None:
 class _PlayProgress:
     """Samples played, from HIGH_RATE.profile_index: live on a terminal, every 10 % otherwise."""
 
-    def __init__(self) -> None:
+    def __init__(self, rate_hz: float) -> None:
         self.tty = sys.stderr.isatty()
         self.decile = -1
+        self.rate_hz = rate_hz                # the profile's sample rate (the control rate)
 
     def __call__(self, index: int, count: int) -> None:
         fraction = index / count if count else 1.0
         if self.tty:
             print(f"\rplaying: {100 * fraction:5.1f} % ({index}/{count} samples, "
-                  f"{index / 1200:.1f} s)", end="", file=sys.stderr, flush=True)
+                  f"{index / self.rate_hz:.1f} s)", end="", file=sys.stderr, flush=True)
         elif int(fraction * 10) > self.decile:
             self.decile = int(fraction * 10)
             print(f"playing: {100 * fraction:3.0f} % ({index}/{count} samples)",
@@ -182,7 +183,7 @@ def _cmd_play(args) -> int:
         return _fail(f"{args.file}: refused, nothing was sent: " + "; ".join(check.problems))
     print(f"{profile.name}: {profile.target}, {profile.duration:g} s ({profile.sample_count} "
           f"samples), mode {mode}", flush=True)
-    progress = _PlayProgress()
+    progress = _PlayProgress(profile.rate)
     players: list = []                       # the player, for what it made safe
     try:
         with command_station(args, dictionary) as station:
