@@ -19,7 +19,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .cli_station import add_device_options, command_station
+from .cli_station import add_device_options, command_station, fail, print_progress
 from .errors import GroundStationError
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
@@ -97,20 +97,6 @@ def load_dictionary_for(args):
     return load_dictionary(args.protocol_dir)
 
 
-def _progress(step: str, fraction: float) -> None:
-    if sys.stderr.isatty():                  # a live percentage on a terminal, one line in a log
-        print(f"\r{step}: {100 * fraction:5.1f} %", end="", file=sys.stderr, flush=True)
-        if fraction >= 1.0:
-            print("", file=sys.stderr, flush=True)
-    elif fraction >= 1.0:
-        print(f"{step}: done", file=sys.stderr, flush=True)
-
-
-def _fail(text: str, code: int = EXIT_REFUSED) -> int:
-    print(f"error: {text}", file=sys.stderr)
-    return code
-
-
 def _cmd_upload(args) -> int:
     from .params.clearance import ValidationRefused
     from .params.design import load_design, table_values
@@ -120,14 +106,14 @@ def _cmd_upload(args) -> int:
         design = load_design(args.file)
     except GroundStationError as exc:
         text = str(exc)
-        return _fail(text if text.startswith(str(args.file)) else f"{args.file}: {text}", EXIT_UNREADABLE)
+        return fail(text if text.startswith(str(args.file)) else f"{args.file}: {text}", EXIT_UNREADABLE)
     dictionary = load_dictionary_for(args)
     # refuse before touching the device: the design over the defaults must already pass
     first = validate(design, table_values(design, dictionary=dictionary), dictionary)
     if not first.ok:
         for line in report_lines(design, first):
             print(line)
-        return _fail(f"{args.file}: refused, nothing was sent")
+        return fail(f"{args.file}: refused, nothing was sent")
     try:
         with command_station(args, dictionary, testbed=str(design.testbed.path)) as station:
             # the very table that is sent - the design over the device's active table -
@@ -137,16 +123,16 @@ def _cmd_upload(args) -> int:
                 print(line)
             try:
                 record = station.upload_table(values, str(args.file), design=design,
-                                              progress=_progress)
+                                              progress=print_progress)
             except GroundStationError as exc:
                 if isinstance(exc.__cause__, ValidationRefused):
-                    return _fail(f"{args.file}: refused, nothing was sent")
+                    return fail(f"{args.file}: refused, nothing was sent")
                 raise
             print(f"verified: table {record.crc:08x} v{record.version} active since tick "
                   f"{record.activated_tick} (previous {record.previous_crc:08x}); read back bit for "
                   f"bit, HOUSEKEEPING agrees")
     except GroundStationError as exc:
-        return _fail(str(exc))
+        return fail(str(exc))
     return EXIT_OK
 
 
@@ -163,7 +149,7 @@ def _cmd_show(args) -> int:
             design = load_design(args.against)
             testbed = str(design.testbed.path)
     except GroundStationError as exc:
-        return _fail(str(exc), EXIT_UNREADABLE)
+        return fail(str(exc), EXIT_UNREADABLE)
     try:
         with command_station(args, load_dictionary_for(args), testbed=testbed) as station:
             loader = station.parameter_loader()
@@ -197,7 +183,7 @@ def _cmd_show(args) -> int:
                 print(f"{len(differ)} entr{'y differs' if len(differ) == 1 else 'ies differ'}: "
                       + ", ".join(differ))
     except GroundStationError as exc:
-        return _fail(str(exc))
+        return fail(str(exc))
     return EXIT_OK
 
 
@@ -210,11 +196,11 @@ def _cmd_rollback(args) -> int:
     try:
         with command_station(args, load_dictionary_for(args)) as station:
             try:
-                record = station.rollback_params(progress=_progress)
+                record = station.rollback_params(progress=print_progress)
             except GroundStationError as exc:
-                return _fail(str(exc) + (f"\n{_SIM_NOTE}" if station.simulated else ""))
+                return fail(str(exc) + (f"\n{_SIM_NOTE}" if station.simulated else ""))
             print(f"rolled back: table {record.crc:08x} active again (was {record.previous_crc:08x}), "
                   f"verified")
     except GroundStationError as exc:
-        return _fail(str(exc))
+        return fail(str(exc))
     return EXIT_OK

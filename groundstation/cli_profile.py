@@ -17,7 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .cli_station import add_device_options
+from .cli_station import add_device_options, fail, print_progress
 from .errors import GroundStationError
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
@@ -64,11 +64,6 @@ def _add_play(actions) -> None:
     s.set_defaults(func=_cmd_play)
 
 
-def _fail(text: str, code: int = EXIT_REFUSED) -> int:
-    print(f"error: {text}", file=sys.stderr)
-    return code
-
-
 def _gyro_range(args) -> float:
     from .profiles.profile import DEFAULT_GYRO_RANGE
     if not args.testbed:
@@ -87,9 +82,9 @@ def _load(args):
         gyro = _gyro_range(args)
         profile = load_profile(args.file, dictionary, validate=False)
     except ProfileFileError as exc:
-        return _fail(str(exc), EXIT_UNREADABLE)
+        return fail(str(exc), EXIT_UNREADABLE)
     except GroundStationError as exc:
-        return _fail(str(exc), EXIT_UNREADABLE)
+        return fail(str(exc), EXIT_UNREADABLE)
     return dictionary, profile, check_profile(profile, dictionary, gyro_range=gyro), gyro
 
 
@@ -110,7 +105,7 @@ def _cmd_show(args) -> int:
         try:
             write_csv(profile, args.csv)
         except OSError as exc:
-            return _fail(f"{args.csv}: cannot write ({exc.strerror})")
+            return fail(f"{args.csv}: cannot write ({exc.strerror})")
         print(f"samples written to {args.csv}")
     for w in check.warnings:
         print(f"warning:  {w}")
@@ -121,15 +116,6 @@ def _cmd_show(args) -> int:
         return EXIT_REFUSED
     print("OK: the profile may be played")
     return EXIT_OK
-
-
-def _upload_progress(step: str, fraction: float) -> None:
-    if sys.stderr.isatty():                   # a live percentage on a terminal, one line in a log
-        print(f"\r{step}: {100 * fraction:5.1f} %", end="", file=sys.stderr, flush=True)
-        if fraction >= 1.0:
-            print("", file=sys.stderr, flush=True)
-    elif fraction >= 1.0:
-        print(f"{step}: done", file=sys.stderr, flush=True)
 
 
 class _PlayProgress:
@@ -175,12 +161,12 @@ def _cmd_play(args) -> int:
     dictionary, profile, check, gyro = loaded
     mode = args.mode or default_mode(profile.target)
     if mode not in profile.info.modes:
-        return _fail(f"{args.file}: a {profile.target} profile plays in "
+        return fail(f"{args.file}: a {profile.target} profile plays in "
                      f"{' or '.join(profile.info.modes)}, not {mode}; nothing was sent")
     for w in check.warnings:
         print(f"warning: {w}", file=sys.stderr)
     if not check.ok:
-        return _fail(f"{args.file}: refused, nothing was sent: " + "; ".join(check.problems))
+        return fail(f"{args.file}: refused, nothing was sent: " + "; ".join(check.problems))
     print(f"{profile.name}: {profile.target}, {profile.duration:g} s ({profile.sample_count} "
           f"samples), mode {mode}", flush=True)
     progress = _PlayProgress(profile.rate)
@@ -189,12 +175,12 @@ def _cmd_play(args) -> int:
         with command_station(args, dictionary) as station:
             try:
                 result = station.play_profile(profile, mode, timeout=args.timeout, gyro_range=gyro,
-                                              progress=progress, upload_progress=_upload_progress,
+                                              progress=progress, upload_progress=print_progress,
                                               on_step=lambda text: print(f"{text} ...", flush=True),
                                               player_out=players)
             except KeyboardInterrupt:
                 progress.done()
-                return _fail("interrupted: " + _safety(players[0] if players else None))
+                return fail("interrupted: " + _safety(players[0] if players else None))
             progress.done()
             rec = players[0].record
             assert rec is not None
@@ -203,12 +189,12 @@ def _cmd_play(args) -> int:
                   + (f", offset {rec.offset:.9g} rad" if rec.origin == "relative" else ""))
             print(result.text())
             if not result.completed:
-                return _fail(f"{profile.name}: playback {result.reason}; " + _safety(players[0]))
+                return fail(f"{profile.name}: playback {result.reason}; " + _safety(players[0]))
             print("done: disarmed")
     except KeyboardInterrupt:
-        return _fail("interrupted before playback: the device was not started")
+        return fail("interrupted before playback: the device was not started")
     except GroundStationError as exc:
         progress.done()
         player = players[0] if players else None
-        return _fail(f"{exc}" + (f"; {_safety(player)}" if player is not None and player.made_safe else ""))
+        return fail(f"{exc}" + (f"; {_safety(player)}" if player is not None and player.made_safe else ""))
     return EXIT_OK

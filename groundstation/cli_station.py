@@ -4,8 +4,28 @@ and the window.  A simulator started here goes with the command."""
 
 from __future__ import annotations
 
+import sys
 from contextlib import contextmanager
 from typing import Iterator
+
+#: the exit status of a command that refused or failed (the device was left safe)
+EXIT_REFUSED = 1
+
+
+def fail(text: str, code: int = EXIT_REFUSED) -> int:
+    """Say why a command stops, on stderr, and return its exit status."""
+    print(f"error: {text}", file=sys.stderr)
+    return code
+
+
+def print_progress(step: str, fraction: float) -> None:
+    """A transfer's progress: a live percentage on a terminal, one line in a log."""
+    if sys.stderr.isatty():
+        print(f"\r{step}: {100 * fraction:5.1f} %", end="", file=sys.stderr, flush=True)
+        if fraction >= 1.0:
+            print("", file=sys.stderr, flush=True)
+    elif fraction >= 1.0:
+        print(f"{step}: done", file=sys.stderr, flush=True)
 
 
 def add_device_options(s, *, history: bool = False) -> None:
