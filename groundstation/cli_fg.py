@@ -38,7 +38,6 @@ from __future__ import annotations
 import argparse
 import csv
 import math
-import re
 import signal
 import threading
 from contextlib import contextmanager
@@ -167,13 +166,6 @@ def _cmd_set(args) -> int:
     return 0
 
 
-def _arb_name(text: str) -> str:
-    name = re.sub(r"[^A-Za-z0-9_]", "_", text)
-    if not name or not name[0].isalpha():
-        name = "BM_" + name
-    return name[:16]
-
-
 def _profile(args, testbed, duration_s: float | None = None, seed: int | None = None,
              rms_mrad: float | None = None, precompensate: bool | None = None):
     from .basemotion import load_profile
@@ -278,10 +270,12 @@ def _write_csp(path: str, check) -> None:
 
 
 def _cmd_upload(args) -> int:
+    from .instruments.spec4050 import arb_name_for
+
     testbed = _testbed(args)
     profile = _profile(args, testbed)
     print(profile.summary(), flush=True)
-    name = _arb_name(args.name or profile.name)
+    name = arb_name_for(args.name or profile.name)
     settle = profile.stage.settling_time_s()
     if args.check:
         # refused before anything moves: a check needs a settled, whole period

@@ -40,12 +40,13 @@ from ..basemotion import BaseMotionProfile, BaseStageModel, PsdTable, load_psd, 
 from ..errors import GroundStationError
 from ..instruments import (BasicWave, FunctionGenerator4050, InstrumentLinkError, SafetyLimits,
                            SettingRefusedError, list_resources, open_generator)
+from ..instruments.spec4050 import arb_name_for
 from ..plant.testbed import DEFAULT_TESTBED, Testbed, load_testbed
 from .fg_jobs import JobQueue
 from .fg_limits_text import limit_texts, limits_source
 from .fg_motion_check import check_uploaded_motion, newest_device_time
 from .fg_records import (DEFAULT_TOLERANCE, SIMULATOR, CheckResult, GeneratorState,
-                         ResourceChoice, UploadedProfile, _arb_name)
+                         ResourceChoice, UploadedProfile)
 
 log = logging.getLogger(__name__)
 
@@ -340,7 +341,7 @@ class GeneratorController(QObject):
         """Upload a base-motion profile as the channel's arbitrary waveform and play it
         (ARB at 1/period); the output state is left as it is.  Returns the refusal
         reason, or None when queued."""
-        arb_name = _arb_name(name or profile.name)
+        arb_name = arb_name_for(name or profile.name)
         peak = max(abs(float(profile.volts.max())), abs(float(profile.volts.min())))
         wave = BasicWave("ARB", profile.frequency_hz, 2 * peak, 0.0, 0.0)
         reason = self._precheck(channel, wave, self._known_load(channel))

@@ -89,10 +89,3 @@ class CheckResult:
                 f"{fmax:.3g} Hz; per band achieved/target mrad: {bands}; device time "
                 f"{self.window.start_s:.2f}-{self.window.end_s:.2f} s{missing}")
 
-
-def _arb_name(text: str) -> str:
-    """A name the instrument takes: a letter, then up to 15 letters, digits or '_'."""
-    name = "".join(ch if ch.isascii() and (ch.isalnum() or ch == "_") else "_" for ch in text)
-    if not name or not name[0].isalpha():
-        name = "BM_" + name
-    return name[:16]

@@ -209,6 +209,16 @@ ARB_CODE_MIN = -8192            # 14-bit values stored in the 16-bit words (VERI
 ARB_CODE_MAX = 8191             # may use offset binary 0..16383; change these three then)
 ARB_CODE_FULL_SCALE = 8191      # code that plays +AMP/2 (and -8191 plays -AMP/2)
 ARB_NAME_PATTERN = re.compile(r"^[A-Za-z][A-Za-z0-9_]{0,15}$")
+
+
+def arb_name_for(text: str) -> str:
+    """A stored-waveform name the instrument takes, made from any text (a profile's name):
+    other characters become '_', a name not starting with a letter gets 'BM_' before it,
+    and it is cut to 16 characters (ARB_NAME_PATTERN)."""
+    name = re.sub(r"[^A-Za-z0-9_]", "_", text)
+    if not name or not name[0].isalpha():
+        name = "BM_" + name
+    return name[:16]
 #: built-in waveforms selectable by `ARWV INDEX,n` (the simulator's small subset; the
 #: real instrument has several dozen)
 BUILTIN_ARB_NAMES = ("StairUp", "StairDn", "StairUD", "Trapezia", "ExpFal", "ExpRise",
