@@ -175,7 +175,7 @@ def test_profile_preview_play_and_abort(qtbot, window, tmp_path):
     qtbot.waitUntil(panel.play_button.isEnabled, timeout=5000)
     assert panel.play() is None
     qtbot.waitUntil(lambda: panel.outcome is not None, timeout=30000)
-    status, text, result = panel.outcome
+    status, text, result = panel.outcome.status, panel.outcome.text, panel.outcome.result
     assert status == "completed", text
     assert result.samples_played == 6000
     snap = ring.snapshot(["profile_index"], seconds=20.0)
@@ -193,7 +193,7 @@ def test_profile_preview_play_and_abort(qtbot, window, tmp_path):
                     timeout=20000)
     qtbot.keyClick(window.events.search, Qt.Key.Key_Escape)
     qtbot.waitUntil(lambda: panel.outcome is not None, timeout=10000)
-    status, text, result = panel.outcome
+    status, text, result = panel.outcome.status, panel.outcome.text, panel.outcome.result
     assert status == "aborted", text
     assert "ABORTED" in panel.status.text()
     qtbot.waitUntil(lambda: ring.latest("armed") == 0, timeout=10000)

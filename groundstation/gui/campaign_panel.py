@@ -82,7 +82,7 @@ class CampaignPanel(QWidget):
         c.sig_failed.connect(self._on_failed)
         session.sig_link_state.connect(lambda *_: self._update_readiness())
         session.sig_source.connect(lambda *_: self._update_readiness())
-        session.sig_profile.connect(lambda kind, _: kind == "done" and self._update_readiness())
+        session.sig_profile_done.connect(lambda _outcome: self._update_readiness())
         self._update_readiness()
 
     # ------------------------------------------------------------------ layout

@@ -28,12 +28,14 @@ from pathlib import Path
 from PySide6.QtCore import QObject, Signal
 
 from ..params import table as ptable
+from ..params.upload import UploadRecord
 from ..profiles.profile import WAVEFORMS_DIR
 from ..plant.testbed import DEFAULT_TESTBED, PROFILES_DIR
 from .charts import StripChartPanel
 from .params_panel import ParameterPanel
 from .profile_panel import ProfilePanel
 from .session import Session
+from .session_events import PlayOutcome
 
 DEMO_TITLE = "Demo: step response on the simulator"
 CONTROLLERS_DIR = PROFILES_DIR / "controllers"
@@ -102,8 +104,9 @@ class DemoController(QObject):
         #: an upload of ours is still on its worker thread (even after an abort): no new
         #: demo until it has ended, so two uploads never overlap
         self._upload_pending = False
-        session.sig_params.connect(self._on_params)
-        session.sig_profile.connect(self._on_profile)
+        session.sig_params_uploaded.connect(self._on_uploaded)
+        session.sig_params_failed.connect(self._on_params_failed)
+        session.sig_profile_done.connect(self._on_profile_done)
         session.sig_link_state.connect(self._on_link)
         # an ABORT sent by another path during the upload stops the demo too (the window's
         # abort() cancels first; while playing, the profile's outcome tells)
@@ -188,19 +191,27 @@ class DemoController(QObject):
         if name == "ABORT" and self.state == "uploading":
             self.cancel("aborted: an ABORT was sent during the upload; nothing was played")
 
-    def _on_params(self, kind: str, payload) -> None:
-        if kind not in ("uploaded", "failed") or not self._upload_pending:
-            return
+    def _upload_ended(self) -> bool:
+        """Our upload has ended (verified or failed): True when the demo goes on."""
+        if not self._upload_pending:
+            return False
         self._upload_pending = False
         if self.state != "uploading":          # aborted meanwhile: nothing more is started
             self.update_availability()
+            return False
+        return True
+
+    def _on_uploaded(self, record: UploadRecord) -> None:
+        if not self._upload_ended():
             return
-        if kind == "failed":
-            self._fail(f"upload failed: {payload}")
-        elif payload.crc != self._crc:
-            self._fail(f"the device took table {payload.crc:08x}, not the demo's {self._crc:08x}")
+        if record.crc != self._crc:
+            self._fail(f"the device took table {record.crc:08x}, not the demo's {self._crc:08x}")
         else:
             self._play()
+
+    def _on_params_failed(self, text: str) -> None:
+        if self._upload_ended():
+            self._fail(f"upload failed: {text}")
 
     def _play(self) -> None:
         plan = self.plan
@@ -215,15 +226,12 @@ class DemoController(QObject):
         if reason:
             self._fail(f"not played: {reason}")
 
-    def _on_profile(self, kind: str, payload) -> None:
-        if kind != "done":
-            return
+    def _on_profile_done(self, outcome: PlayOutcome) -> None:
         if self.state == "playing":
-            status, text, _result = payload
-            state = {"completed": "completed", "aborted": "aborted"}.get(status, "failed")
+            state = {"completed": "completed", "aborted": "aborted"}.get(outcome.status, "failed")
             self._set(state, "step response done: the charts show it; run it again, or load "
                       "another design or profile in the docks" if state == "completed" else
-                      f"{status}: {text}")
+                      f"{outcome.status}: {outcome.text}")
         else:
             self.update_availability()          # a profile of someone else's ended
 

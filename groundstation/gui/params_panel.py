@@ -4,7 +4,7 @@ Three columns of values side by side (design or edited / last uploaded from here
 the device reports), edit in place with range checks, validation with the closed loop of
 the design's testbed, a Bode plot of the loop gain with its margins, upload (confirmed),
 read back and roll back.  The widget does no link I/O: the Session runs uploads on worker
-threads and answers with sig_params."""
+threads (the Station's verbs) and answers with its sig_params_* signals."""
 
 from __future__ import annotations
 
@@ -26,6 +26,7 @@ from ..params import table as ptable
 from ..params.compare import three_way, wire_value
 from ..params.design import ControllerDesign, load_design, table_values
 from ..params.loop import ValidationReport, bode, report_lines, validate
+from ..params.upload import ActiveTable, UploadRecord
 from .session import Session
 
 COLUMNS = ("Parameter", "Design / edited", "Last uploaded", "Device", "Units", "Range")
@@ -54,7 +55,10 @@ class ParameterPanel(QWidget):
         self.override_reason: str | None = None
         self._filling = False
         self._build()
-        session.sig_params.connect(self._on_params)
+        session.sig_params_active.connect(self._on_active)
+        session.sig_params_uploaded.connect(self._on_uploaded)
+        session.sig_params_progress.connect(self._on_progress)
+        session.sig_params_failed.connect(self._on_failed)
         session.sig_link_state.connect(self._on_link)
 
     # ------------------------------------------------------------------ layout
@@ -262,25 +266,29 @@ class ParameterPanel(QWidget):
             return self.confirm_override
         return QMessageBox.question(self, "Parameter upload", text) == QMessageBox.StandardButton.Yes
 
-    def _on_params(self, kind: str, payload) -> None:
-        if kind == "progress":
-            step, fraction = payload
-            self.progress.setVisible(True)
-            self.progress.setFormat(f"{step} %p%")
-            self.progress.setValue(int(100 * fraction))
-            return
-        if kind == "active":
-            self.device, self.device_crc = payload.values, payload.crc
-            if self.values is None:                   # start editing from what runs
-                self.values, self.source = dict(payload.values), "edited from the device's table"
-            self.progress.setVisible(False)
-        elif kind == "uploaded":
-            self.uploaded = self._sent
-            self._say(f"table {payload.crc:08x} verified on the device (v{payload.version}, "
-                      f"read back bit for bit, HOUSEKEEPING agrees)")
-        elif kind == "failed":
-            self.progress.setVisible(False)
-            self._say(f"upload failed: {payload}", bad=True)
+    def _on_progress(self, step: str, fraction: float) -> None:
+        self.progress.setVisible(True)
+        self.progress.setFormat(f"{step} %p%")
+        self.progress.setValue(int(100 * fraction))
+
+    def _on_active(self, table: ActiveTable) -> None:
+        self.device, self.device_crc = table.values, table.crc
+        if self.values is None:                   # start editing from what runs
+            self.values, self.source = dict(table.values), "edited from the device's table"
+        self.progress.setVisible(False)
+        self._fill()
+
+    def _on_uploaded(self, record: UploadRecord) -> None:
+        self.uploaded = self._sent
+        gate = ("" if record.validated else
+                f"; NOT validated, sent on the reason: {record.override_reason}")
+        self._say(f"table {record.crc:08x} verified on the device (v{record.version}, "
+                  f"read back bit for bit, HOUSEKEEPING agrees){gate}")
+        self._fill()
+
+    def _on_failed(self, text: str) -> None:
+        self.progress.setVisible(False)
+        self._say(f"upload failed: {text}", bad=True)
         self._fill()
 
     def _on_link(self, state: str, _message: str) -> None:

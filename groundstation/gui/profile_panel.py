@@ -9,7 +9,8 @@ power spectral density on log axes.
 
 The widget does no I/O and no numerics: `groundstation.profiles` reads, checks,
 summarises and previews the profile; the Session plays it on its worker thread
-(`Session.play_profile`) and answers with sig_profile.  Esc (MainWindow.abort) stops it.
+(`Session.play_profile`, the Station's verb) and answers with its sig_profile_* signals.
+Esc (MainWindow.abort) stops it.
 """
 
 from __future__ import annotations
@@ -31,6 +32,7 @@ from ..profiles import (TARGETS, Profile, ProfileCheck, ProfileSummary, check_pr
 from ..profiles.profile import WAVEFORMS_DIR
 from .file_combo import select_file
 from .session import Session
+from .session_events import PlayOutcome
 
 BAD_STYLE = "color:#c62828; font-weight:bold;"
 WARN_STYLE = "color:#b26a00;"
@@ -61,12 +63,15 @@ class ProfilePanel(QWidget):
         self.check: ProfileCheck | None = None
         self.summary: ProfileSummary | None = None
         self.path: Path | None = None
-        #: the last playback's outcome: (status, text, PlaybackResult or None)
-        self.outcome: tuple[str, str, object] | None = None
+        #: the last playback's outcome (status, text, PlaybackResult or None)
+        self.outcome: PlayOutcome | None = None
         #: tests answer the confirmation dialog through this (None: ask the operator)
         self.confirm_override: bool | None = None
         self._build()
-        session.sig_profile.connect(self._on_profile)
+        session.sig_profile_step.connect(self._on_step)
+        session.sig_profile_upload.connect(self._on_upload)
+        session.sig_profile_progress.connect(self._on_progress)
+        session.sig_profile_done.connect(self._on_done)
         session.sig_link_state.connect(lambda *_: self._update_buttons())
         session.sig_source.connect(lambda *_: self._update_buttons())
         session.campaign.sig_started.connect(lambda *_: self._update_buttons(campaign=True))
@@ -373,27 +378,31 @@ class ProfilePanel(QWidget):
             return self.confirm_override
         return QMessageBox.question(self, "Play profile", text) == QMessageBox.StandardButton.Yes
 
-    def _on_profile(self, kind: str, payload) -> None:
+    def _on_step(self, text: str) -> None:
+        self.progress.setFormat(f"{text}…")
+        self._say(f"{text}…")
+        self._update_buttons()
+
+    def _on_upload(self, fraction: float) -> None:
+        self.progress.setFormat("uploading %p%")
+        self.progress.setValue(int(1000 * fraction))
+        self._update_buttons()
+
+    def _on_progress(self, played: int, count: int) -> None:
         rate = self.profile.rate if self.profile is not None else self.d.control_rate_hz
-        if kind == "step":
-            self.progress.setFormat(f"{payload}…")
-            self._say(f"{payload}…")
-        elif kind == "upload":
-            self.progress.setFormat("uploading %p%")
-            self.progress.setValue(int(1000 * payload))
-        elif kind == "progress":
-            played, count = payload
-            self.progress.setFormat(f"playing %p% - {played / rate:.1f} of {count / rate:.1f} s")
-            self.progress.setValue(int(1000 * played / max(count, 1)))
-            self.playhead.setValue(played / rate)
-        elif kind == "done":
-            status, text, _result = payload
-            self.outcome = payload
-            self.progress.setFormat(status)
-            if status == "completed":
-                self.progress.setValue(1000)
-            self.playhead.setVisible(status != "completed")   # where it stopped
-            self._say(f"{status.upper()}: {text}", style=STATUS_STYLES.get(status, ""))
+        self.progress.setFormat(f"playing %p% - {played / rate:.1f} of {count / rate:.1f} s")
+        self.progress.setValue(int(1000 * played / max(count, 1)))
+        self.playhead.setValue(played / rate)
+        self._update_buttons()
+
+    def _on_done(self, outcome: PlayOutcome) -> None:
+        self.outcome = outcome
+        self.progress.setFormat(outcome.status)
+        if outcome.completed:
+            self.progress.setValue(1000)
+        self.playhead.setVisible(not outcome.completed)   # where it stopped
+        self._say(f"{outcome.status.upper()}: {outcome.text}",
+                  style=STATUS_STYLES.get(outcome.status, ""))
         self._update_buttons()
 
     def _update_buttons(self, campaign: bool | None = None) -> None:

@@ -1,11 +1,19 @@
 """The GUI's session controller: owns the link (or the replay), the simulator child
 process (with its function generator), the recorder, the function-generator controller
-and the campaign controller (campaigns run on this session's link), plays command
-profiles, and turns their thread callbacks into Qt signals.
+and the campaign controller (campaigns run on this session's link), and turns thread
+callbacks into Qt signals.
+
+The parameter table and command profiles go through the Station verbs, exactly as the
+CLI and scripts do: while the link is up a `Station` is attached to it (`self.station`,
+`Station.attach`: it borrows the link, journals into this session's recording and keeps
+the parameter history), and params_read / params_upload / params_rollback / play_profile
+run its verbs on worker threads - the validation gate (a table goes only validated
+against its design, or on the operator's stated reason) is the Station's, not the GUI's.
 
 Widgets never touch a socket or a file: they call this object's methods, which run
 anything that can block (connecting, commands, opening a log) on worker threads, and
-they read the TelemetryStore / LimitMonitor on their own timers.
+they read the TelemetryStore / LimitMonitor on their own timers.  Results arrive as
+typed signals, one per event (sig_params_active carries an ActiveTable, ...).
 """
 
 from __future__ import annotations
@@ -24,12 +32,14 @@ from ..link import DeviceClient, open_client
 from ..logs import Recorder, ReplaySource
 from ..logs.live import attach_recorder
 from ..limits import LimitMonitor
-from ..params.upload import ParameterHistory, ParameterLoader
-from ..profiles import Profile, ProfilePlayer
+from ..params.upload import ParameterHistory
+from ..profiles import Profile
 from ..sim.process import SimulatorProcess
+from ..station.station import Station
 from ..display_buffers import TelemetryStore
 from .campaign_runner import CampaignController
 from .fg_controller import GeneratorController
+from .session_events import PlayOutcome
 
 log = logging.getLogger(__name__)
 
@@ -49,13 +59,16 @@ class Session(QObject):
     sig_command = Signal(str, str, str, str)     # command, sequence (u32, as text), stage, reason
     sig_recording = Signal(str, str)             # state ("recording", "stopped", "failed"), text
     sig_source = Signal(str, str)                # "live"/"replay"/"none", description
-    #: parameter table work: ("active", ActiveTable) after a read, ("uploaded", UploadRecord),
-    #: ("progress", (step, fraction)), ("failed", message)
-    sig_params = Signal(str, object)
-    #: profile playback: ("step", text), ("upload", fraction), ("progress", (played, count)),
-    #: then once ("done", (status, text, PlaybackResult or None)) with status "completed",
-    #: "ended early", "aborted" or "failed"
-    sig_profile = Signal(str, object)
+    # parameter table work (worker threads)
+    sig_params_active = Signal(object)           # ActiveTable: after a read, upload, rollback
+    sig_params_uploaded = Signal(object)         # UploadRecord: a table verified on the device
+    sig_params_progress = Signal(str, float)     # step ("upload", "read back"), fraction done
+    sig_params_failed = Signal(str)              # why a read, upload or rollback failed
+    # profile playback (worker thread): steps, upload, progress, then once sig_profile_done
+    sig_profile_step = Signal(str)               # "uploading", "mode RELATIVE", "playing", ...
+    sig_profile_upload = Signal(float)           # fraction of the profile uploaded
+    sig_profile_progress = Signal(int, int)      # samples played, sample count
+    sig_profile_done = Signal(object)            # PlayOutcome (session_events.py)
 
     def __init__(self, dictionary: Dictionary, store_seconds: float = 600.0, parent=None,
                  param_history: str | Path | None = None):
@@ -66,6 +79,8 @@ class Session(QObject):
         self.store.on_restart = self._on_device_restart
         self.limits = LimitMonitor(dictionary)
         self.client: DeviceClient | None = None
+        #: the Station verbs on the live link (attached when it comes up, closed with it)
+        self.station: Station | None = None
         self.replay: ReplaySource | None = None
         self.sim: SimulatorProcess | None = None
         self.recorder: Recorder | None = None
@@ -165,7 +180,13 @@ class Session(QObject):
             if self._closing or not self._want_connected:
                 client.close()                     # the operator gave up meanwhile
                 return
-            self.client = client
+            try:
+                station = Station.attach(client, testbed=self.testbed, history=self.param_history,
+                                         journal=self._journal, echo=self._station_echo)
+            except BaseException:
+                client.close()
+                raise
+            self.client, self.station = client, station
             if self.recorder is not None and self.recorder.state == "recording":
                 self._detach_recorder = attach_recorder(client, self.recorder)   # a reconnect keeps recording
             self._attempt = 0
@@ -183,6 +204,7 @@ class Session(QObject):
         self.generator.abort()
         self._want_connected = False
         self._reconnect.stop()
+        self._close_station()
         client, self.client = self.client, None
         if client is not None:
             self._worker(client.close, "gs-disconnect")
@@ -207,12 +229,14 @@ class Session(QObject):
         self.stop_recording()
         self._want_connected = False
         self._reconnect.stop()
+        self._close_station()
         if self.client is not None:
             self.client.close()
             self.client = None
         for t in self._workers:
             t.join(timeout=10.0)
-        if self.client is not None:                # connected while we waited
+        self._close_station()                      # connected while we waited
+        if self.client is not None:
             self.client.close()
             self.client = None
         if self.sim is not None:
@@ -234,6 +258,7 @@ class Session(QObject):
     def _try_reconnect(self) -> None:
         if not self._want_connected:
             return
+        self._close_station()
         old, self.client = self.client, None
         if old is not None:
             self._worker(old.close, "gs-close-lost")
@@ -301,70 +326,91 @@ class Session(QObject):
             return
         self.command("ABORT")
 
-    # ------------------------------------------------------------------ parameter table
-    def _param_loader(self) -> ParameterLoader | None:
-        client = self.client
-        if client is None:
-            self.sig_params.emit("failed", "not connected")
-            return None
-        return ParameterLoader(client, self.d, self.param_history, journal=self._journal)
+    # ------------------------------------------------------------------ the Station
+    def _close_station(self) -> None:
+        """Detach the Station from the link (the link itself is closed by the caller, or
+        goes on).  A verb still running on its worker thread fails on the closed link
+        and reports it as usual."""
+        station, self.station = self.station, None
+        if station is not None:
+            station.close()
 
-    def _journal(self, kind: str, record: dict, blob: bytes) -> None:
+    def _station_echo(self, text: str) -> None:
+        """What the Station says about its verbs: the Python log only.  The operator's
+        event log gets the Session's own reports of the same work (with the table's
+        version, an override as a WARNING; see _uploaded)."""
+        log.info("station: %s", text)
+
+    def _journal(self, kind: str, record: dict, blob: bytes = b"") -> None:
+        """The Station's journal entries (uploads, profiles) go into this session's
+        recording, when one runs."""
         rec = self.recorder
         if rec is not None:
             rec.record(kind, record, blob)
 
+    # ------------------------------------------------------------------ parameter table
     def _param_work(self, name: str, work) -> None:
-        loader = self._param_loader()
-        if loader is None:
+        """Run `work(station)` on a worker thread; a failure arrives as sig_params_failed
+        (and an ERROR event)."""
+        station = self.station
+        if station is None or self.client is None:
+            self.sig_params_failed.emit("not connected")
             return
 
         def run():
             try:
-                work(loader)
-            except GroundStationError as exc:
-                self.sig_params.emit("failed", str(exc))
-                self.sig_event.emit("ERROR", "parameters", str(exc))
+                work(station)
+            except GroundStationError as exc:     # ScriptError too: refused, device fault
+                self._params_failed(str(exc))
+            except Exception as exc:              # a bug: said, so no panel waits forever
+                log.exception("parameter table: %s", name)
+                self._params_failed(f"{type(exc).__name__}: {exc}")
         self._worker(run, f"gs-params-{name}")
 
+    def _params_failed(self, text: str) -> None:
+        self.sig_params_failed.emit(text)
+        self.sig_event.emit("ERROR", "parameters", text)
+
     def params_read(self) -> None:
-        """Read the device's active table (worker thread); arrives as sig_params 'active'."""
-        self._param_work("read", lambda loader: self.sig_params.emit(
-            "active", loader.read_active(self._param_progress)))
+        """Read the device's active table (worker thread); arrives as sig_params_active."""
+        self._param_work("read", lambda station: self.sig_params_active.emit(
+            station.read_params(self._param_progress)))
 
     def params_upload(self, values: dict, source: str, design=None,
                       accept_risk: str | None = None) -> None:
-        """Validate (against `design`), upload and verify a table (worker thread):
-        'uploaded', then 'active'.  Without a design, or refused by the validation, it is
-        sent only with `accept_risk`, the operator's reason (recorded)."""
-        from ..params.clearance import clear_design, override_table
-
-        def work(loader):
-            clearance = (clear_design(design, values, self.d, accept_risk)[0] if design is not None
-                         else override_table(values, self.d, accept_risk or ""))
-            record = loader.upload(values, source, progress=self._param_progress,
-                                   clearance=clearance)
+        """Validate (against `design`), upload and verify a table (worker thread,
+        Station.upload_table): sig_params_uploaded, then sig_params_active.  Without a
+        design, or refused by the validation, it is sent only with `accept_risk`, the
+        operator's reason (recorded in the history, the recording and the record)."""
+        def work(station: Station) -> None:
+            record = station.upload_table(values, source, design=design, accept_risk=accept_risk,
+                                          progress=self._param_progress)
             self._uploaded(record)
-            self.sig_params.emit("active", loader.read_active())
+            self.sig_params_active.emit(station.read_params())
         self._param_work("upload", work)
 
     def params_rollback(self) -> None:
-        """Re-activate the table that was active before the last upload."""
-        def work(loader):
-            record = loader.rollback(progress=self._param_progress)
+        """Re-activate the table that was active before the last upload
+        (Station.rollback_params): sig_params_uploaded, then sig_params_active."""
+        def work(station: Station) -> None:
+            record = station.rollback_params(progress=self._param_progress)
             self._uploaded(record)
-            self.sig_params.emit("active", loader.read_active())
+            self.sig_params_active.emit(station.read_params())
         self._param_work("rollback", work)
 
     def _uploaded(self, record) -> None:
         self.last_uploaded_crc = record.crc
-        self.sig_params.emit("uploaded", record)
-        self.sig_event.emit("INFO", "parameters",
-                            f"parameter table {record.crc:08x} (v{record.version}) verified on the "
-                            f"device: {record.source}")
+        self.sig_params_uploaded.emit(record)
+        text = (f"parameter table {record.crc:08x} (v{record.version}) verified on the "
+                f"device: {record.source}")
+        if record.validated:
+            self.sig_event.emit("INFO", "parameters", text)
+        else:
+            self.sig_event.emit("WARNING", "parameters",
+                                f"{text} - NOT validated ({'; '.join(record.validation_problems)})")
 
     def _param_progress(self, step: str, fraction: float) -> None:
-        self.sig_params.emit("progress", (step, fraction))
+        self.sig_params_progress.emit(step, fraction)
 
     # ------------------------------------------------------------------ profiles
     @property
@@ -372,11 +418,14 @@ class Session(QObject):
         return self._playing
 
     def play_profile(self, profile: Profile, mode: str | None = None) -> str | None:
-        """Upload (verified), arm, play to the end and disarm a profile on a worker thread,
-        journaled into the recording if one runs.  Returns why not (nothing sent), else
-        None; progress and the outcome arrive as sig_profile.  Abort ends it at once."""
-        client = self.client
-        if self.replay is not None or client is None or client.link_state != "up":
+        """Upload (verified), arm, play to the end and disarm a profile on a worker thread
+        (Station.play_profile), journaled into the recording if one runs.  Returns why
+        not (nothing sent), else None; progress arrives as sig_profile_step /
+        sig_profile_upload / sig_profile_progress, then once sig_profile_done with a
+        PlayOutcome.  Abort ends it at once."""
+        client, station = self.client, self.station
+        if (self.replay is not None or client is None or station is None
+                or client.link_state != "up"):
             return "not connected: connect to the device first"
         if self._playing:
             return "a profile is already playing"
@@ -387,9 +436,6 @@ class Session(QObject):
         self.sig_event.emit("INFO", "profile", f"playing {profile.name} ({profile.duration:g} s, "
                                                f"{profile.target}) in {mode or 'its default mode'}")
 
-        def emit(kind: str, payload) -> None:
-            self.sig_profile.emit(kind, payload)
-
         aborted_at: list[float] = []
 
         def check_abort() -> None:
@@ -399,10 +445,10 @@ class Session(QObject):
 
         def on_step(text: str) -> None:
             check_abort()                   # between upload, mode, arm and start
-            emit("step", text)
+            self.sig_profile_step.emit(text)
 
         def progress(played: int, count: int) -> None:
-            emit("progress", (played, count))
+            self.sig_profile_progress.emit(played, count)
             if self._play_abort.is_set():
                 # the device's ABORT ends playback within a period, and the player sees it
                 # in the telemetry; should that not come, stop waiting and make safe here
@@ -413,36 +459,33 @@ class Session(QObject):
                                          f"of {count} samples; the device was made safe")
 
         def work() -> None:
-            player = ProfilePlayer(client, self.d, journal=self._journal)
-            outcome: tuple[str, str, object]
             try:
-                result = player.play(profile, mode, progress=progress, on_step=on_step,
-                                     upload_progress=lambda step, f: emit("upload", f))
+                result = station.play_profile(
+                    profile, mode, progress=progress, on_step=on_step,
+                    upload_progress=lambda _step, f: self.sig_profile_upload.emit(f))
             except ProfileAborted as exc:
-                outcome = ("aborted", str(exc), None)
-            except GroundStationError as exc:
-                status = "aborted" if self._play_abort.is_set() else "failed"
-                outcome = (status, str(exc), None)
+                outcome = PlayOutcome("aborted", str(exc))
+            except GroundStationError as exc:   # ScriptError too: a device fault, not open
+                outcome = PlayOutcome("aborted" if self._play_abort.is_set() else "failed", str(exc))
             except Exception as exc:        # a bug: the player made the device safe; say so
                 log.exception("playing %s", profile.name)
-                outcome = ("failed", f"{type(exc).__name__}: {exc}", None)
+                outcome = PlayOutcome("failed", f"{type(exc).__name__}: {exc}")
             else:
                 if result.completed:
-                    outcome = ("completed", result.text(), result)
+                    outcome = PlayOutcome("completed", result.text(), result)
                 elif self._play_abort.is_set():
                     # the device ends an aborted profile "disarmed" (its first event):
                     # the operator's abort is the cause
-                    outcome = ("aborted", f"aborted by the operator: {result.text()}", result)
+                    outcome = PlayOutcome("aborted", f"aborted by the operator: {result.text()}",
+                                          result)
                 else:
-                    outcome = ("ended early", result.text(), result)
+                    outcome = PlayOutcome("ended early", result.text(), result)
             finally:
-                player.close()
                 self._playing = False
-            status, text, _ = outcome
-            self.sig_event.emit("INFO" if status == "completed" else
-                                "WARNING" if status == "aborted" else "ERROR",
-                                "profile", f"{profile.name}: {status}: {text}")
-            emit("done", outcome)
+            self.sig_event.emit("INFO" if outcome.status == "completed" else
+                                "WARNING" if outcome.status == "aborted" else "ERROR",
+                                "profile", f"{profile.name}: {outcome.status}: {outcome.text}")
+            self.sig_profile_done.emit(outcome)
         self._worker(work, "gs-profile-play")
         return None
 
