@@ -378,7 +378,9 @@ class RecordingPanel(QWidget):
         form.addRow(self.button)
         form.addRow(self.info)
         self.button.clicked.connect(self.toggle)
-        session.sig_recording.connect(self._recording)
+        session.sig_recording_started.connect(self._started_recording)
+        session.sig_recording_stopped.connect(self._stopped_recording)
+        session.sig_recording_failed.connect(self._failed_recording)
         self._started = 0.0
         self._timer = QTimer(self)
         self._timer.timeout.connect(self._update)
@@ -390,16 +392,21 @@ class RecordingPanel(QWidget):
         else:
             self.session.start_recording(self.folder.text(), self.name.text(), self.notes.text())
 
-    def _recording(self, state: str, text: str) -> None:
-        if state == "recording":
-            self._started = time.monotonic()
-            self.button.setText("Stop recording")
-            self.info.setStyleSheet("color:#c62828; font-weight:bold;")
-            self.info.setText(f"recording to {text}")
-        else:
-            self.button.setText("Start recording")
-            self.info.setStyleSheet("color:#c62828; font-weight:bold;" if state == "failed" else "")
-            self.info.setText(f"{state}: {text}")
+    def _started_recording(self, path: str) -> None:
+        self._started = time.monotonic()
+        self.button.setText("Stop recording")
+        self.info.setStyleSheet("color:#c62828; font-weight:bold;")
+        self.info.setText(f"recording to {path}")
+
+    def _stopped_recording(self, text: str) -> None:
+        self.button.setText("Start recording")
+        self.info.setStyleSheet("")
+        self.info.setText(f"stopped: {text}")
+
+    def _failed_recording(self, text: str) -> None:
+        self.button.setText("Start recording")
+        self.info.setStyleSheet("color:#c62828; font-weight:bold;")
+        self.info.setText(f"failed: {text}")
 
     def _update(self) -> None:
         rec = self.session.recorder

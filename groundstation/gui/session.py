@@ -57,7 +57,9 @@ class Session(QObject):
     sig_link_state = Signal(str, str)            # state, message
     sig_event = Signal(str, str, str)            # level, source, text
     sig_command = Signal(str, str, str, str)     # command, sequence (u32, as text), stage, reason
-    sig_recording = Signal(str, str)             # state ("recording", "stopped", "failed"), text
+    sig_recording_started = Signal(str)          # the log file's path
+    sig_recording_stopped = Signal(str)          # what was written ("N frames in a.h5, ...")
+    sig_recording_failed = Signal(str)           # why the recording failed (or ended badly)
     sig_source = Signal(str, str)                # "live"/"replay"/"none", description
     # parameter table work (worker threads)
     sig_params_active = Signal(object)           # ActiveTable: after a read, upload, rollback
@@ -496,18 +498,18 @@ class Session(QObject):
         testbed_text = Path(self.testbed).read_text() if self.testbed else ""
         rec = Recorder(self.d, folder, test_name=test_name or "test", notes=notes,
                        testbed_text=testbed_text, testbed_path=self.testbed or "",
-                       on_failure=lambda msg: self.sig_recording.emit("failed", msg))
+                       on_failure=self.sig_recording_failed.emit)
         try:
             path = rec.start()
         except GroundStationError as exc:
-            self.sig_recording.emit("failed", str(exc))
+            self.sig_recording_failed.emit(str(exc))
             return None
         self.recorder = rec
         if self.client is not None:
             self._detach_recorder = attach_recorder(self.client, rec)
         if notes:
             rec.note(notes)
-        self.sig_recording.emit("recording", str(path))
+        self.sig_recording_started.emit(str(path))
         return path
 
     def stop_recording(self) -> None:
@@ -520,10 +522,11 @@ class Session(QObject):
             detach()
         status = rec.stop()
         if status.state == "stopped":
-            self.sig_recording.emit("stopped", f"{status.frames} frames in "
-                                    + ", ".join(p.name for p in status.files))
+            self.sig_recording_stopped.emit(f"{status.frames} frames in "
+                                            + ", ".join(p.name for p in status.files))
         else:
-            self.sig_recording.emit(status.state, status.error)
+            self.sig_recording_failed.emit(status.error if status.state == "failed"
+                                           else f"{status.state}: {status.error}")
 
     # ------------------------------------------------------------------ replay
     def open_log(self, path: str) -> None:
