@@ -498,7 +498,8 @@ class Station:
         if self.client is None:
             raise ScriptError("the session is not open")
         if self.state.fault:
-            raise ScriptError("the device reports a fault (see its EVENTs); it has disarmed")
+            raise ScriptError("the device reports a fault (see its EVENTs); it has disarmed - "
+                              "send DISARM to acknowledge it, then try again")
 
     def _close_generator(self) -> None:
         gen, self.generator = self.generator, None
