@@ -11,8 +11,8 @@ Side by side in one run, each as a fresh process (median of N):
     python benchmarks/bench_cli.py [--repeats 7] [--before REV]
 
 `--before REV` also times `--help` and `fg off` of that revision (a temporary git
-worktree put first on PYTHONPATH, same interpreter and libraries): before and after
-in one run.
+worktree, run from inside it so that its package is the one imported; same interpreter
+and libraries): before and after in one run.
 """
 
 from __future__ import annotations
@@ -44,12 +44,13 @@ COMMANDS = {
 }
 
 
-def wall(cmd: list[str], pythonpath: str | None = None) -> float:
+def wall(cmd: list[str], tree: str | None = None) -> float:
+    """Seconds for one fresh process of `cmd`, run in `tree` (default: this checkout)."""
     env = {"QT_QPA_PLATFORM": "offscreen", "PATH": "/usr/bin:/bin"}
-    if pythonpath:
-        env["PYTHONPATH"] = pythonpath
     t0 = time.perf_counter()
-    done = subprocess.run(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+    # the working directory comes first on sys.path: the tree timed is the one we stand in
+    done = subprocess.run(cmd, cwd=tree or ROOT, stdout=subprocess.DEVNULL,
+                          stderr=subprocess.PIPE, env=env)
     seconds = time.perf_counter() - t0
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(cmd)}: exit {done.returncode}: {done.stderr.decode()[-400:]}")
