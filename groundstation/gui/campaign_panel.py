@@ -29,7 +29,7 @@ from ..campaign import Campaign, StepResult, load_campaign
 from ..errors import GroundStationError
 from ..plant.testbed import PROFILES_DIR
 from .campaign_runner import CampaignOutcome
-from .file_combo import select_file
+from .file_combo import FilePicker
 from .session import Session
 
 CAMPAIGNS_DIR = PROFILES_DIR / "campaigns"
@@ -205,8 +205,12 @@ class CampaignPanel(QWidget):
         split.setSizes([900, 600])
         lay.addWidget(split, 1)
 
-        self.file.currentIndexChanged.connect(lambda _: self._file_chosen())
-        self.browse_button.clicked.connect(self.load_dialog)
+        # a campaign chosen in the combo while one runs is not loaded
+        self.file_picker = FilePicker(
+            self, self.file, self.browse_button, self.load, title="Campaign",
+            folder=CAMPAIGNS_DIR, file_filter="Campaigns (*.toml);;All files (*)",
+            loaded=lambda path: self.campaign is not None and self.path == path,
+            may_load=lambda: not self.running)
         self.folder_button.clicked.connect(self._choose_folder)
         self.run_button.clicked.connect(self.run)
         self.abort_button.clicked.connect(self.sig_abort.emit)
@@ -214,22 +218,11 @@ class CampaignPanel(QWidget):
 
     # ------------------------------------------------------------------ loading
     def load_dialog(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Campaign", str(CAMPAIGNS_DIR),
-                                              "Campaigns (*.toml);;All files (*)")
-        if path:
-            self.set_file(path)
+        self.file_picker.dialog()
 
     def set_file(self, path: str | Path) -> bool:
         """Choose a campaign file (added to the list if needed) and load it."""
-        path = Path(path).resolve()
-        if select_file(self.file, path):             # already current: no change signal
-            return self.load(str(path))
-        return self.campaign is not None and self.path == path
-
-    def _file_chosen(self) -> None:
-        path = self.file.currentData()
-        if path and not self.running:
-            self.load(path)
+        return self.file_picker.set_file(path)
 
     def _choose_folder(self) -> None:
         folder = QFileDialog.getExistingDirectory(self, "Log folder", self.folder.text())

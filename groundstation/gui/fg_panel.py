@@ -22,10 +22,10 @@ look in `fg_styles`.  Every name is still importable from here.
 from __future__ import annotations
 
 from PySide6.QtCore import Qt, QTimer
-from PySide6.QtWidgets import (QHBoxLayout, QLabel, QScrollArea, QSizePolicy, QSplitter,
-                               QVBoxLayout, QWidget)
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QSizePolicy, QVBoxLayout, QWidget
 
 from ..basemotion import BaseMotionProfile
+from .dock_layout import controls_beside_plots
 from .fg_base_motion import (BASE_MOTION_DIR, LEGEND_BRUSH, MRAD, MRAD2, PENS,  # noqa: F401
                              Z_SYNTH, Z_TARGET, BaseMotionEditor)
 from .fg_channel_editor import (FIELD_BAD, OUTPUT_OFF_STYLE, OUTPUT_ON_STYLE,  # noqa: F401
@@ -73,30 +73,10 @@ class GeneratorPanel(ChannelEditor, BaseMotionEditor, QWidget):
         outer = QVBoxLayout(self)
         outer.setContentsMargins(4, 2, 4, 2)
         outer.setSpacing(2)
-        split = QSplitter(Qt.Orientation.Horizontal)
-        controls = QWidget()
-        row = QHBoxLayout(controls)
-        row.setContentsMargins(0, 0, 0, 0)
-        row.setSpacing(6)
-        # three short columns side by side: the dock is wide and low
-        row.addWidget(self._instrument_box())
-        row.addWidget(self._wave_box())
-        row.addWidget(self._motion_box())
-        scroll = QScrollArea()
-        scroll.setWidget(controls)
-        scroll.setWidgetResizable(True)
-        scroll.setFrameShape(QScrollArea.Shape.NoFrame)
-        # the panel must not set the window's minimum width: the splitter starts with all
-        # the controls in view (room left for a vertical scroll bar in a low dock), and on
-        # a narrow screen the plots give way first
-        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        scroll.setMinimumWidth(280)
-        split.addWidget(scroll)
-        split.addWidget(self._plots())
-        split.setStretchFactor(0, 0)
-        split.setStretchFactor(1, 1)
-        split.setCollapsible(0, False)
-        split.setSizes([controls.sizeHint().width() + 40, 600])
+        # three short columns (instrument, basic wave, base motion) beside the plots
+        split = controls_beside_plots(
+            [self._instrument_box(), self._wave_box(), self._motion_box()], self._plots(),
+            min_width=280, plots_width=600, pad=40)
         outer.addWidget(split, 1)
         status = QHBoxLayout()
         self.status = QLabel("")

@@ -21,16 +21,17 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
 from PySide6.QtGui import QFont
-from PySide6.QtWidgets import (QComboBox, QFileDialog, QGridLayout, QGroupBox, QHBoxLayout,
-                               QLabel, QMessageBox, QProgressBar, QPushButton, QScrollArea,
-                               QSizePolicy, QSplitter, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QComboBox, QGridLayout, QGroupBox, QHBoxLayout, QLabel,
+                               QMessageBox, QProgressBar, QPushButton, QSizePolicy, QVBoxLayout,
+                               QWidget)
 
 from ..dictionary import Dictionary
 from ..errors import GroundStationError
 from ..profiles import (TARGETS, Profile, ProfileCheck, ProfileSummary, check_profile,
                         default_mode, load_profile, preview, summarise)
 from ..profiles.profile import WAVEFORMS_DIR
-from .file_combo import select_file
+from .dock_layout import controls_beside_plots
+from .file_combo import FilePicker
 from .session import Session
 from .session_events import PlayOutcome
 
@@ -83,27 +84,9 @@ class ProfilePanel(QWidget):
     def _build(self) -> None:
         outer = QVBoxLayout(self)
         outer.setContentsMargins(4, 2, 4, 2)
-        split = QSplitter(Qt.Orientation.Horizontal)
-        left = QWidget()
-        # two short columns side by side, the plots beside them: the dock is wide and low
-        row = QHBoxLayout(left)
-        row.setContentsMargins(0, 0, 0, 0)
-        row.setSpacing(6)
-        row.addWidget(self._profile_box())
-        row.addWidget(self._play_box())
-        scroll = QScrollArea()
-        scroll.setWidget(left)
-        scroll.setWidgetResizable(True)
-        scroll.setFrameShape(QScrollArea.Shape.NoFrame)
-        # the panel must not set the window's minimum width: the plots give way first
-        scroll.setHorizontalScrollBarPolicy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
-        scroll.setMinimumWidth(300)
-        split.addWidget(scroll)
-        split.addWidget(self._plots())
-        split.setStretchFactor(0, 0)
-        split.setStretchFactor(1, 1)
-        split.setCollapsible(0, False)
-        split.setSizes([left.sizeHint().width() + 20, 800])
+        # two short columns (the profile, playing it) beside the plots
+        split = controls_beside_plots([self._profile_box(), self._play_box()], self._plots(),
+                                      min_width=300, plots_width=800, pad=20)
         outer.addWidget(split, 1)
 
     def _profile_box(self) -> QGroupBox:
@@ -159,8 +142,10 @@ class ProfilePanel(QWidget):
         lay.addWidget(self.checks)
         lay.addStretch(1)
         box.setFixedWidth(490)
-        self.file.currentIndexChanged.connect(lambda _: self._file_chosen())
-        self.browse_button.clicked.connect(self.load_dialog)
+        self.file_picker = FilePicker(
+            self, self.file, self.browse_button, self.load, title="Command profile",
+            folder=WAVEFORMS_DIR, file_filter="Profiles (*.toml);;All files (*)",
+            loaded=lambda path: self.profile is not None and self.path == path)
         return box
 
     def _play_box(self) -> QGroupBox:
@@ -238,22 +223,11 @@ class ProfilePanel(QWidget):
 
     # ------------------------------------------------------------------ loading
     def load_dialog(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Command profile", str(WAVEFORMS_DIR),
-                                              "Profiles (*.toml);;All files (*)")
-        if path:
-            self.set_file(path)
+        self.file_picker.dialog()
 
     def set_file(self, path: str | Path) -> bool:
         """Choose a profile file (added to the list if needed) and load it."""
-        path = Path(path).resolve()
-        if select_file(self.file, path):             # already current: no change signal
-            return self.load(str(path))
-        return self.profile is not None and self.path == path
-
-    def _file_chosen(self) -> None:
-        path = self.file.currentData()
-        if path:
-            self.load(path)
+        return self.file_picker.set_file(path)
 
     def load(self, path: str | Path) -> bool:
         """Read, check, summarise and plot a profile (nothing is sent)."""
