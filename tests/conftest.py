@@ -62,3 +62,38 @@ def client(dictionary, device):
     c = open_client(dictionary, f"127.0.0.1:{device.tcp_port}", heartbeat=False)
     yield c
     c.close()
+
+
+@pytest.fixture
+def gui_window(qtbot, dictionary, tmp_path):
+    """A factory for the main window on a fresh Session, shown (offscreen), its settings in
+    tmp_path: gui_window(store_seconds, confirm=("commands", ...), history=True,
+    sim_speed=None).  `confirm`: the panels whose confirmation dialogs answer "Yes"
+    (their confirm_override); `history`: the parameter history in tmp_path (False: the
+    Session's default folder); `sim_speed`: the simulator's speed, set before the window
+    is built.  Every Session made is shut down at teardown."""
+    from PySide6.QtCore import QSettings
+
+    from groundstation.gui.main_window import MainWindow
+    from groundstation.gui.session import Session
+
+    sessions = []
+
+    def make(store_seconds: float, *, confirm: tuple[str, ...] = (), history: bool = True,
+             sim_speed: float | None = None):
+        kwargs = {"param_history": tmp_path / "history"} if history else {}
+        session = Session(dictionary, store_seconds=store_seconds, **kwargs)
+        sessions.append(session)
+        if sim_speed is not None:
+            session.sim_speed = sim_speed
+        settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
+        win = MainWindow(session, settings)
+        qtbot.addWidget(win)
+        win.show()
+        for panel in confirm:
+            getattr(win, panel).confirm_override = True
+        return win
+
+    yield make
+    for session in sessions:
+        session.shutdown()

@@ -11,10 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from PySide6.QtCore import QSettings, Qt
+from PySide6.QtCore import Qt
 
-from groundstation.gui.main_window import MainWindow
-from groundstation.gui.session import Session
 from groundstation.logs import LogReader
 from groundstation.scripting import Testbed
 
@@ -28,16 +26,9 @@ DWELL = STEPS.index("dwell")
 
 
 @pytest.fixture
-def window(qtbot, dictionary, tmp_path):
-    session = Session(dictionary, store_seconds=30.0, param_history=tmp_path / "history")
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    win = MainWindow(session, settings)
-    qtbot.addWidget(win)
-    win.show()
-    win.campaign.confirm_override = True         # "Yes" to Run and to pause steps
-    win.profiles.confirm_override = True         # "Yes" to Play
-    yield win
-    session.shutdown()
+def window(gui_window):
+    # "Yes" to Run and to pause steps (campaign) and to Play (profiles)
+    return gui_window(30.0, confirm=("campaign", "profiles"))
 
 
 def campaign_file(tmp_path: Path, name: str, dwell_s: float) -> Path:

@@ -16,14 +16,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 import pyvisa
-from PySide6.QtCore import QSettings, Qt
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QMenu
 
 from groundstation.basemotion import BaseStageModel
 from groundstation.cli import main
+from groundstation.gui.fg_motion_check import newest_device_time
 from groundstation.gui.fg_panel import FIELD_BAD
-from groundstation.gui.main_window import MainWindow
-from groundstation.gui.session import Session
 from groundstation.logs import LogReader
 from groundstation.plant.testbed import load_testbed
 
@@ -34,21 +33,15 @@ STAGE = BaseStageModel.from_testbed(load_testbed(ROOT / INERTIAL))
 
 
 @pytest.fixture
-def window(qtbot, dictionary, tmp_path):
-    session = Session(dictionary, store_seconds=60.0)
-    session.sim_speed = 3.0
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    win = MainWindow(session, settings)
-    qtbot.addWidget(win)
-    win.show()
+def window(gui_window):
+    win = gui_window(60.0, history=False, sim_speed=3.0)
     win.docks["Generator"].raise_()
-    yield win
-    session.shutdown()
+    return win
 
 
 def newest(session) -> float:
-    t = session.store.ring("HIGH_RATE").snapshot([], seconds=0.0).device_time
-    return float(t[-1]) if len(t) else 0.0
+    """The product's newest HIGH_RATE device time, 0.0 before any (the waits compare it)."""
+    return newest_device_time(session) or 0.0
 
 
 def open_simulated_generator(qtbot, win):

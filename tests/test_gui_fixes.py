@@ -10,24 +10,16 @@ the device matters, against the simulated testbed (a child process, as in `make 
 from __future__ import annotations
 
 import pytest
-from PySide6.QtCore import QSettings, Qt
+from PySide6.QtCore import Qt
 
 from groundstation.gui.demo import DEMO_TITLE, plan_for
-from groundstation.gui.main_window import MainWindow
-from groundstation.gui.session import Session
 from groundstation.sim import SimulatedDevice
 
 
 @pytest.fixture
-def window(qtbot, dictionary, tmp_path):
-    session = Session(dictionary, store_seconds=60.0, param_history=tmp_path / "history")
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    win = MainWindow(session, settings)
-    qtbot.addWidget(win)
-    win.show()
-    win.commands.confirm_override = True        # answer "Yes" to critical-command dialogs
-    yield win
-    session.shutdown()
+def window(gui_window):
+    # answer "Yes" to critical-command dialogs
+    return gui_window(60.0, confirm=("commands",))
 
 
 def ring(win):

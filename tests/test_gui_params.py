@@ -7,10 +7,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from PySide6.QtCore import QSettings
 
-from groundstation.gui.main_window import MainWindow
-from groundstation.gui.session import Session
 from groundstation.logs import LogReader
 from groundstation.params import table as ptable
 
@@ -18,15 +15,8 @@ CONTROLLERS = Path(__file__).resolve().parent.parent / "profiles" / "controllers
 
 
 @pytest.fixture
-def window(qtbot, dictionary, tmp_path):
-    session = Session(dictionary, store_seconds=20.0, param_history=tmp_path / "history")
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    win = MainWindow(session, settings)
-    qtbot.addWidget(win)
-    win.show()
-    win.parameters.confirm_override = True
-    yield win
-    session.shutdown()
+def window(gui_window):
+    return gui_window(20.0, confirm=("parameters",))
 
 
 def tree_row(panel, name):

@@ -11,9 +11,7 @@ import ast
 from pathlib import Path
 
 import pytest
-from PySide6.QtCore import QSettings
 
-from groundstation.gui.main_window import MainWindow
 from groundstation.gui.session import Session
 from groundstation.gui.session_events import PLAY_STATUSES, PlayOutcome
 from groundstation.params import table as ptable
@@ -29,16 +27,8 @@ GUI = ROOT / "groundstation" / "gui"
 
 
 @pytest.fixture
-def window(qtbot, dictionary, tmp_path):
-    session = Session(dictionary, store_seconds=20.0, param_history=tmp_path / "history")
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    win = MainWindow(session, settings)
-    qtbot.addWidget(win)
-    win.show()
-    win.parameters.confirm_override = True
-    win.profiles.confirm_override = True
-    yield win
-    session.shutdown()
+def window(gui_window):
+    return gui_window(20.0, confirm=("parameters", "profiles"))
 
 
 def connect(qtbot, window) -> Session:

@@ -14,15 +14,9 @@ from groundstation.logs import LogReader
 
 
 @pytest.fixture
-def window(qtbot, dictionary, tmp_path):
-    session = Session(dictionary, store_seconds=60.0)
-    settings = QSettings(str(tmp_path / "settings.ini"), QSettings.Format.IniFormat)
-    win = MainWindow(session, settings)
-    qtbot.addWidget(win)
-    win.show()
-    win.commands.confirm_override = True        # answer "Yes" to critical-command dialogs
-    yield win
-    session.shutdown()
+def window(gui_window):
+    # answer "Yes" to critical-command dialogs
+    return gui_window(60.0, confirm=("commands",), history=False)
 
 
 def hr_frames(win) -> int:
