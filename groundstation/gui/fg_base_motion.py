@@ -25,6 +25,7 @@ from ..basemotion import BaseMotionProfile, preview_spectrum
 from ..errors import GroundStationError
 from ..instruments import spec4050 as spec
 from ..plant.testbed import PROFILES_DIR
+from .file_combo import select_file
 from .fg_limits_text import limit_texts
 from .fg_records import DEFAULT_TOLERANCE, CheckResult, UploadedProfile
 from .fg_styles import BAD_STYLE, OK_STYLE, SMALL_STYLE, WARN_STYLE, _spin
@@ -61,7 +62,7 @@ class BaseMotionEditor:
         pick = QHBoxLayout()
         self.profile_file = QComboBox()
         for path in sorted(BASE_MOTION_DIR.glob("*.csv")):
-            self.profile_file.addItem(path.stem, str(path))
+            self.profile_file.addItem(path.stem, str(path.resolve()))   # as select_file keys them
         self.profile_file.setToolTip("a PSD table: frequency_hz,psd_rad2_per_hz "
                                      "(profiles/base_motion/README.md)")
         self.browse_button = QPushButton("File…")
@@ -181,12 +182,7 @@ class BaseMotionEditor:
             self.set_profile_file(path)
 
     def set_profile_file(self, path: str | Path) -> None:
-        path = str(path)
-        index = self.profile_file.findData(path)
-        if index < 0:
-            self.profile_file.addItem(Path(path).stem, path)
-            index = self.profile_file.count() - 1
-        self.profile_file.setCurrentIndex(index)
+        select_file(self.profile_file, path)       # a change re-plots through the combo's signal
 
     def _schedule_preview(self) -> None:
         self._preview_timer.start()
