@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import signal
 
+from ..analysis.spectra import csp
 from .psd import BaseMotionError, PsdTable
 from .synthesis import BaseMotionProfile
 
@@ -83,11 +84,10 @@ class BaseMotionCheck:
 
 
 def csp_from_psd(frequency_hz, psd) -> np.ndarray:
-    """Cumulative spectral power: the trapezoidal running integral, 0 at the first frequency."""
-    f = np.asarray(frequency_hz, dtype=float)
-    p = np.asarray(psd, dtype=float)
-    steps = np.diff(f) * (p[1:] + p[:-1]) / 2
-    return np.concatenate([[0.0], np.cumsum(steps)])
+    """Cumulative spectral power: the trapezoidal running integral, 0 at the first
+    frequency - the ground station's one CSP (analysis/spectra.py), under this module's
+    name."""
+    return csp(frequency_hz, psd)
 
 
 def check_base_motion(angle_rad, sample_rate_hz: float, target: PsdTable | BaseMotionProfile, *,

@@ -1,0 +1,30 @@
+"""Figures of merit computed from recorded telemetry: line-of-sight jitter, control
+energy, spectra - from arrays in memory, or from a log read in bounded chunks.
+
+    from groundstation.analysis import los_jitter, control_energy, psd, csp
+
+The numerics (jitter.py, energy.py, spectra.py) take arrays and hold no I/O and no Qt.
+"""
+
+from __future__ import annotations
+
+from ..errors import GroundStationError
+
+
+class AnalysisError(GroundStationError):
+    """An analysis cannot be done on the data given (the message says what is missing
+    and what to do: another sensor, another window, a testbed file)."""
+
+
+# after AnalysisError: the modules import it from here
+from .energy import ControlEnergy, EnergyAccumulator, control_energy  # noqa: E402
+from .jitter import (DEFAULT_INTEGRATION_PERIOD_S, JitterAccumulator, JitterResult,  # noqa: E402
+                     highpass_jitter_rms, integration_period_factor, los_jitter, sensor_valid,
+                     sinusoid_smear_rms, windowed_smear_rms)
+from .spectra import Spectrum, WelchAccumulator, csp, psd  # noqa: E402
+
+__all__ = ["AnalysisError", "ControlEnergy", "DEFAULT_INTEGRATION_PERIOD_S", "EnergyAccumulator",
+           "JitterAccumulator", "JitterResult", "Spectrum",
+           "WelchAccumulator", "control_energy", "csp", "highpass_jitter_rms",
+           "integration_period_factor", "los_jitter", "psd", "sensor_valid", "sinusoid_smear_rms",
+           "windowed_smear_rms"]
