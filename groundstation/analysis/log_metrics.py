@@ -1,0 +1,366 @@
+"""Jitter, control energy and spectra of a recorded log, read in bounded chunks.
+
+`analyze_log(path)` is the adapter between the numerics (jitter.py, energy.py,
+spectra.py: arrays in, no I/O) and a log: it reads HIGH_RATE through
+`groundstation.logs.LogReader`, `chunk_rows` rows at a time, and feeds the running
+accumulators - sums for mean/RMS/std, the high-pass filter's state, the last
+integration period of samples for the windowed smear, the unfinished Welch segment,
+energy sums and saturation counts - so an hour-long log (4.32 M frames) is never in
+memory at once and the result equals the in-memory functions on the same data.
+
+The window is `start_s`..`stop_s` seconds of device time from the log's start
+(inclusive, None: open end).  The testbed constants (the autocollimator's calibrated
+range, the motor resistances) come from the testbed file recorded in the log, or from
+`testbed=` when given.
+
+Missing frames.  Sequence numbers count frames the device sent; the tick counts control
+periods.  Energy and filters run in control periods, so the holes are found in device
+time (ticks): a step of k ticks between consecutive frames means k - 1 frames are
+missing, whether the link lost them or the device never sent them.  They are never
+bridged: the jitter filter, its windows and the Welch segments restart after a hole,
+the energy integrates only the frames received, and the count is reported.
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+import numpy as np
+
+from ..logs import LogReader
+from ..logs.channels import convertible, to_engineering
+from ..plant.testbed import Testbed, TestbedConfigError, load_testbed
+from . import AnalysisError
+from .energy import ControlEnergy, EnergyAccumulator
+from .jitter import DEFAULT_INTEGRATION_PERIOD_S, JitterAccumulator, JitterResult, sensor_valid
+from .spectra import DEFAULT_SEGMENT_S, Spectrum, WelchAccumulator, segment_samples
+
+PACKET = "HIGH_RATE"
+SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
+DEFAULT_SENSOR = "autocollimator"           # the reference's scoring sensor
+METRICS = ("jitter", "energy", "psd")
+DEFAULT_CHUNK_ROWS = 1 << 18                # ~2 MB per float64 column read at once
+CURRENTS = ("current_coarse", "current_fine")
+SATURATION_BITS = ("coarse_saturated", "fine_saturated")
+DEG = math.pi / 180.0
+
+
+# ---------------------------------------------------------------------- testbed constants
+@dataclass(frozen=True)
+class TestbedFigures:
+    """The testbed constants the metrics need, and where they came from."""
+
+    __test__ = False
+
+    source: str                                  # '' when the log records no testbed
+    autocollimator_range_rad: float | None
+    resistance_coarse_ohm: float | None
+    resistance_fine_ohm: float | None
+
+    @classmethod
+    def of(cls, tb: Testbed, source: str) -> "TestbedFigures":
+        return cls(source, tb.sensors["autocollimator_range"] * DEG, tb.motor_coarse["resistance"],
+                   tb.motor_fine["resistance"])
+
+
+def _number(doc: dict, section: str, key: str) -> float | None:
+    v = doc.get(section, {}).get(key) if isinstance(doc.get(section), dict) else None
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (v > 0 and math.isfinite(v)):
+        return None
+    return float(v)
+
+
+def figures_from_testbed(reader: LogReader, testbed: str | Path | Testbed | None = None) -> TestbedFigures:
+    """From `testbed` (a file or a loaded Testbed) if given, else from the log: the
+    recorded file itself when it is still where it was and unchanged (then checked in
+    full by load_testbed), else the recorded text - what was true when the log was made."""
+    if testbed is not None:
+        tb = testbed if isinstance(testbed, Testbed) else load_testbed(testbed)
+        return TestbedFigures.of(tb, f"testbed file {tb.path}")
+    name, where, text = reader.testbed()
+    if not text:
+        return TestbedFigures("", None, None, None)
+    label = f"the log's testbed '{name}'" if name else "the log's testbed"
+    if where and Path(where).is_file():
+        try:
+            tb = load_testbed(where)
+        except TestbedConfigError:
+            tb = None
+        if tb is not None and tb.text == text:
+            return TestbedFigures.of(tb, f"{label} ({where})")
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise AnalysisError(f"{reader.path}: the testbed file recorded in the log is not valid "
+                            f"TOML ({exc}): give --testbed FILE") from None
+    rng = _number(doc, "sensors", "autocollimator_range")
+    return TestbedFigures(f"{label} (as recorded in the log)", None if rng is None else rng * DEG,
+                          _number(doc, "motor_coarse", "resistance"),
+                          _number(doc, "motor_fine", "resistance"))
+
+
+# ---------------------------------------------------------------------- missing frames
+TICK_MODULUS = 1 << 32                      # the header's tick is a u32 that wraps (41 days)
+
+
+def frame_steps(tick, previous_tick: int | None = None) -> tuple[np.ndarray, int, int]:
+    """(gap_before, missing frames, non-advancing frames) of consecutive frames' device
+    ticks: gap_before[k] is True when frame k is not one tick after the frame before it
+    (`previous_tick`: the frame before the first; None: none).  A step of k > 1 ticks
+    means k - 1 frames missing; a step of 0 or backwards (a repeated or out-of-order
+    frame) is counted apart and breaks the stretch too."""
+    t = np.asarray(tick).astype(np.uint32, copy=False)
+    if not len(t):
+        return np.zeros(0, dtype=bool), 0, 0
+    steps = np.empty(len(t), dtype=np.uint32)
+    steps[0] = 1 if previous_tick is None else (int(t[0]) - int(previous_tick)) % TICK_MODULUS
+    np.subtract(t[1:], t[:-1], out=steps[1:])          # uint32 arithmetic wraps with the tick
+    gap = steps != 1
+    if not gap.any():
+        return gap, 0, 0
+    odd = steps[gap].astype(np.int64)
+    back = (odd == 0) | (odd >= TICK_MODULUS // 2)     # no advance, or a step backwards
+    return gap, int((odd[~back] - 1).sum()), int(back.sum())
+
+
+# ---------------------------------------------------------------------- the result
+@dataclass(frozen=True)
+class LogMetrics:
+    """The metrics of one log over one window."""
+
+    path: Path
+    test_name: str
+    window_from_s: float               # first frame of the window, s from the log's start
+    window_to_s: float                 # last frame
+    frames: int                        # HIGH_RATE frames in the window
+    missing_frames: int                # frames lost inside it (device-time holes)
+    stalled_frames: int                # frames whose tick did not advance (not bridged either)
+    rate_hz: float
+    sensor: str
+    metrics: tuple[str, ...]
+    testbed_source: str
+    jitter: JitterResult | None = None
+    energy: ControlEnergy | None = None
+    spectrum: Spectrum | None = None
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    @property
+    def missing_metrics(self) -> tuple[str, ...]:
+        """Metrics asked for that the data did not allow (the notes say why)."""
+        have = {"jitter": self.jitter, "energy": self.energy, "psd": self.spectrum}
+        return tuple(m for m in self.metrics if have[m] is None)
+
+    def text(self) -> str:
+        lines = [f"{self.path.name}: {self.window_from_s:.3f}..{self.window_to_s:.3f} s, "
+                 f"{self.frames} frames" + (f", {self.missing_frames} missing" if self.missing_frames else "")]
+        if self.jitter is not None:
+            lines.append("  " + self.jitter.text())
+        if self.energy is not None:
+            lines.append("  " + self.energy.text())
+        if self.spectrum is not None:
+            s = self.spectrum
+            lines.append(f"  PSD of {self.sensor}: {s.segments} segments of {s.segment_samples} samples "
+                         f"({s.resolution_hz:.3g} Hz), sqrt(CSP) {s.rms * 1e6:.3f} urad")
+        lines += [f"  note: {n}" for n in self.notes]
+        return "\n".join(lines)
+
+    def row(self) -> dict[str, Any]:
+        """The figures as one flat record (urad, J, A, %); None where not computed."""
+        j, e, s = self.jitter, self.energy, self.spectrum
+
+        def ur(v: float | None) -> float | None:
+            return None if v is None or not math.isfinite(v) else v * 1e6
+
+        def pct(v: float | None) -> float | None:
+            return None if v is None else v * 100.0
+
+        return {
+            "log": self.path.name, "test_name": self.test_name, "from_s": self.window_from_s,
+            "to_s": self.window_to_s, "frames": self.frames, "missing_frames": self.missing_frames,
+            "sensor": self.sensor,
+            "samples_used": j.samples_used if j else None,
+            "samples_excluded": j.samples_excluded if j else None,
+            "segments": j.segments if j else None,
+            "integration_period_s": j.integration_period_s if j else None,
+            "mean_urad": ur(j.mean_rad) if j else None, "rms_urad": ur(j.rms_rad) if j else None,
+            "std_urad": ur(j.std_rad) if j else None,
+            "highpass_rms_urad": ur(j.highpass_rms_rad) if j else None,
+            "smear_rms_urad": ur(j.smear_rms_rad) if j else None,
+            "energy_coarse_j": e.energy_coarse_j if e else None,
+            "energy_fine_j": e.energy_fine_j if e else None,
+            "energy_total_j": e.energy_total_j if e else None,
+            "rms_current_coarse_a": e.rms_current_coarse_a if e else None,
+            "rms_current_fine_a": e.rms_current_fine_a if e else None,
+            "saturated_coarse_pct": pct(e.saturated_coarse_fraction) if e else None,
+            "saturated_fine_pct": pct(e.saturated_fine_fraction) if e else None,
+            "psd_rms_urad": ur(s.rms) if s else None,
+            "psd_resolution_hz": s.resolution_hz if s else None,
+            "psd_segments": s.segments if s else None,
+            "notes": "; ".join(self.notes), "error": "",
+        }
+
+
+# ---------------------------------------------------------------------- the adapter
+def _metrics(metrics: Iterable[str]) -> tuple[str, ...]:
+    wanted = tuple(dict.fromkeys(metrics))
+    bad = [m for m in wanted if m not in METRICS]
+    if bad or not wanted:
+        raise AnalysisError(f"unknown metric(s) {', '.join(map(repr, bad))}; choose from "
+                            f"{', '.join(METRICS)}" if bad else "no metric asked for")
+    return wanted
+
+
+def analyze_log(path: str | Path, *, metrics: Iterable[str] = METRICS, start_s: float | None = None,
+                stop_s: float | None = None, sensor: str = DEFAULT_SENSOR,
+                integration_period_s: float = DEFAULT_INTEGRATION_PERIOD_S,
+                testbed: str | Path | Testbed | None = None, psd_segment_s: float = DEFAULT_SEGMENT_S,
+                chunk_rows: int = DEFAULT_CHUNK_ROWS) -> LogMetrics:
+    """The metrics of the log at `path` over its window (see the module docstring).
+
+    Raises a GroundStationError naming what is wrong: the log cannot be read (LogError),
+    a channel or testbed constant is missing, the window is empty, or every sample of
+    the scored sensor is excluded (AnalysisError)."""
+    wanted = _metrics(metrics)
+    if sensor not in SENSORS:
+        raise AnalysisError(f"unknown sensor {sensor!r}; choose from {', '.join(SENSORS)}")
+    if chunk_rows < 1:
+        raise AnalysisError(f"chunk_rows must be >= 1, not {chunk_rows}")
+    with LogReader(path) as r:
+        return _analyze(r, wanted, start_s, stop_s, sensor, integration_period_s, testbed,
+                        psd_segment_s, int(chunk_rows))
+
+
+def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s, testbed,
+             psd_segment_s, chunk_rows) -> LogMetrics:
+    chans = {c.name: c for c in r.channels(PACKET)}
+    rate = r.tick_rate_hz
+    figures = figures_from_testbed(r, testbed)
+    notes: list[str] = []
+    columns = ["tick"]               # holes are found in ticks (see the module docstring)
+    angle_from_raw = False
+    range_rad = None
+    rule = ""
+    scoring = "jitter" in wanted or "psd" in wanted
+    if scoring:
+        ch = chans.get(sensor)
+        if ch is None:
+            present = [s for s in SENSORS if s in chans]
+            raise AnalysisError(f"{r.path}: the log has no {PACKET} channel '{sensor}'"
+                                + (f"; score another sensor (--sensor {' | '.join(present)})"
+                                   if present else "; it holds none of the LOS sensors "
+                                                   f"({', '.join(SENSORS)})"))
+        if ch.units != "rad":
+            raise AnalysisError(f"{r.path}: channel '{sensor}' is in {ch.units or 'no units'!r}, "
+                                f"not rad: the log's dictionary differs from this version's")
+        # the A/D count tells a rail sample from a large angle; read it once, convert it
+        # exactly as the reader would
+        angle_from_raw = ch.has_raw and convertible(ch.conversion) and f"raw/{sensor}" in chans
+        columns.append(f"raw/{sensor}" if angle_from_raw else sensor)
+        bits = np.dtype(chans[f"raw/{sensor}"].dtype).itemsize * 8 if angle_from_raw else 0
+        # a count at either end of its wire type is a clipped value, not a measurement
+        rail = (f" or at the {bits}-bit A/D rail" if sensor == "autocollimator"
+                else f" or at the limit of its {bits}-bit count") if angle_from_raw else ""
+        if sensor == "autocollimator":
+            range_rad = figures.autocollimator_range_rad
+            if range_rad is None:
+                notes.append("the autocollimator's calibrated range is unknown (the log records no "
+                             "testbed file with [sensors] autocollimator_range): only samples at "
+                             "the A/D rail are excluded; give --testbed FILE for the range")
+                rule = "at the A/D rail" if angle_from_raw else ""
+            else:
+                rule = (f"|angle| >= {range_rad * 1e3:.4g} mrad (calibrated range "
+                        f"{range_rad / DEG:g} deg, {figures.source}){rail}")
+        else:
+            rule = rail.removeprefix(" or ") if rail else ""
+    sat_bits: tuple[str, ...] = ()
+    if "energy" in wanted:
+        lacking = [c for c in CURRENTS if c not in chans]
+        if lacking:
+            raise AnalysisError(f"{r.path}: the log has no {PACKET} channel(s) {', '.join(lacking)}: "
+                                f"no control energy (use --metrics without energy)")
+        if figures.resistance_coarse_ohm is None or figures.resistance_fine_ohm is None:
+            where = figures.source or "the log records no testbed file"
+            raise AnalysisError(f"{r.path}: the motor resistances ([motor_coarse] / [motor_fine] "
+                                f"resistance) are unknown ({where}): give --testbed FILE")
+        columns += list(CURRENTS)
+        if all(b in chans for b in SATURATION_BITS):
+            sat_bits = SATURATION_BITS
+            columns += list(sat_bits)
+        else:
+            notes.append("the log has no saturation status bits: saturation not reported")
+
+    i0, i1 = r.index_range(PACKET, start_s, stop_s, relative=True)
+    if i1 <= i0:
+        raise AnalysisError(f"{r.path}: no {PACKET} frames in the window "
+                            f"{r.describe_range(PACKET, start_s, stop_s, relative=True)}")
+    jit = JitterAccumulator(rate, integration_period_s) if "jitter" in wanted else None
+    welch = None
+    if "psd" in wanted:
+        welch = WelchAccumulator(rate, segment_samples(rate, psd_segment_s, i1 - i0))
+    energy = (EnergyAccumulator(rate, figures.resistance_coarse_ohm, figures.resistance_fine_ohm)
+              if "energy" in wanted else None)
+    origin = r.origin("device")
+    frames = missing = stalled = 0
+    last_tick = None
+    a = i0
+    while a < i1:
+        d = r.read_rows(PACKET, columns, a, min(i1, a + chunk_rows), with_time=False)
+        ticks = d["tick"]
+        if not len(ticks):           # a live log shorter than its index said: stop there
+            break
+        gap, m, s = frame_steps(ticks, last_tick)
+        missing += m
+        stalled += s
+        last_tick = int(ticks[-1])
+        frames += len(ticks)
+        a += len(ticks)
+        if scoring:
+            if angle_from_raw:
+                counts = d[f"raw/{sensor}"]
+                angle = to_engineering(counts, chans[sensor].conversion)
+            else:
+                counts, angle = None, d[sensor]
+            ok = sensor_valid(angle, range_rad=range_rad, raw_counts=counts)
+            if jit is not None:
+                jit.feed(angle, ok, gap)
+            if welch is not None:
+                welch.feed(angle, ok, gap)
+        if energy is not None:
+            energy.feed(d[CURRENTS[0]], d[CURRENTS[1]],
+                        d[sat_bits[0]] if sat_bits else None, d[sat_bits[1]] if sat_bits else None)
+    # the window's ends in device time: two values, not a column
+    ends = r.read_rows(PACKET, ["device_time"], i0, i0 + 1, with_time=False)["device_time"]
+    first_t = float(ends[0])
+    last_t = float(r.read_rows(PACKET, ["device_time"], i0 + frames - 1, i0 + frames,
+                               with_time=False)["device_time"][0])
+    if stalled:
+        notes.append(f"{stalled} frame(s) did not advance the device tick (repeated or out of "
+                     f"order): the filters restart there")
+    # what the data do not allow (every sample excluded, no stretch long enough for a PSD
+    # segment) leaves that figure out with the reason; the others still stand
+    jitter = spectrum = None
+    if jit is not None:
+        try:
+            jitter = jit.result(sensor, missing_frames=missing, exclusion_rule=rule)
+        except AnalysisError as exc:
+            notes.append(f"no jitter: {exc}")
+    if welch is not None:
+        try:
+            spectrum = welch.result()
+        except AnalysisError as exc:
+            notes.append(f"no PSD: {exc} (--psd-segment S, psd_segment_s=S)")
+    return LogMetrics(
+        path=r.path, test_name=str(r.attrs.get("test_name", "")),
+        window_from_s=first_t - origin, window_to_s=last_t - origin, frames=frames,
+        missing_frames=missing, stalled_frames=stalled, rate_hz=rate, sensor=sensor if scoring else "",
+        metrics=wanted, testbed_source=figures.source, jitter=jitter,
+        energy=energy.result(missing) if energy else None, spectrum=spectrum, notes=tuple(notes))
+
+
+__all__ = ["CURRENTS", "DEFAULT_CHUNK_ROWS", "DEFAULT_SENSOR", "LogMetrics", "METRICS", "PACKET",
+           "SATURATION_BITS", "SENSORS", "TICK_MODULUS", "TestbedFigures", "analyze_log", "frame_steps",
+           "figures_from_testbed"]
