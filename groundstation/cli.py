@@ -9,6 +9,7 @@
     groundstation profile show|play FILE   command profiles (see cli_profile.py)
     groundstation campaign show|run FILE   scripted test campaigns (see cli_campaign.py)
     groundstation fg list|identify|set|upload|off   the base-motion generator (cli_fg.py)
+    groundstation analyze LOG...           jitter, control energy, PSD of logs (cli_analysis.py)
 """
 
 from __future__ import annotations
@@ -21,7 +22,7 @@ import sys
 import threading
 import time
 
-from . import __version__, cli_campaign, cli_fg, cli_logs, cli_params, cli_profile
+from . import __version__, cli_analysis, cli_campaign, cli_fg, cli_logs, cli_params, cli_profile
 from .errors import GroundStationError
 
 
@@ -233,6 +234,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_profile.add_parsers(sub)
     cli_campaign.add_parsers(sub)
     cli_fg.add_parsers(sub)
+    cli_analysis.add_parsers(sub)
     return p
 
 

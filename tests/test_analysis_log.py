@@ -1,4 +1,4 @@
-"""The log adapter (groundstation.analysis.log_metrics), on a
+"""The log adapter (groundstation.analysis.log_metrics) and `groundstation analyze`, on a
 short log recorded from the simulated inertial testbed in open loop: constant currents
 (a known energy), then currents that drive the autocollimator to both ends of its range
 (samples to exclude).  The chunked reading must give what the in-memory functions give
@@ -6,6 +6,9 @@ on the same data."""
 
 from __future__ import annotations
 
+import csv
+import io
+import json
 import math
 import shutil
 from pathlib import Path
@@ -14,10 +17,12 @@ import h5py
 import numpy as np
 import pytest
 
-from groundstation import Testbed
+from groundstation import Testbed, cli_analysis
 from groundstation.analysis import (AnalysisError, analyze_log, control_energy, los_jitter, psd,
                                     sensor_valid)
+from groundstation.analysis import log_metrics
 from groundstation.analysis.log_metrics import frame_steps, figures_from_testbed
+from groundstation.cli import main
 from groundstation.logs import LogError, LogReader
 from groundstation.plant.testbed import load_testbed
 
@@ -226,3 +231,68 @@ def test_every_sample_excluded_leaves_that_figure_out_with_the_reason(sim_log):
     assert m.jitter is None and m.spectrum is None and m.energy is not None
     assert m.missing_metrics == ("jitter", "psd")
     assert any("no jitter: all 301 autocollimator samples" in n for n in m.notes)
+
+
+# ---------------------------------------------------------------------- the command line
+def test_the_cli_prints_one_row_per_log(sim_log, tmp_path, capsys):
+    assert main(["analyze", str(sim_log), "--psd-segment", "1"]) == 0
+    out = capsys.readouterr().out
+    lines = out.splitlines()
+    assert lines[0].split()[:3] == ["log", "window", "s"]
+    assert sim_log.name in lines[1] and "E total J" in lines[0] and "RMS urad" in lines[0]
+    assert "samples excluded (|angle| >= 5.76 mrad" in out and "resistances 4.8 / 6.8 ohm" in out
+
+
+def test_the_cli_json_and_csv_agree_with_the_adapter(sim_log, tmp_path, capsys):
+    m = analyze_log(sim_log, psd_segment_s=1.0, start_s=0.2, stop_s=1.9)
+    args = ["analyze", str(sim_log), "--from", "0.2", "--to", "1.9", "--psd-segment", "1"]
+    assert main(args + ["--json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    assert len(rows) == 1 and rows[0]["error"] == ""
+    assert rows[0]["rms_urad"] == pytest.approx(m.jitter.rms_rad * 1e6)
+    assert rows[0]["energy_total_j"] == pytest.approx(m.energy.energy_total_j)
+    assert rows[0]["psd_rms_urad"] == pytest.approx(m.spectrum.rms * 1e6)
+    assert main(args + ["--csv", "--metrics", "energy"]) == 0
+    table = list(csv.DictReader(io.StringIO(capsys.readouterr().out)))
+    assert list(table[0]) == cli_analysis.ROW_KEYS
+    assert float(table[0]["energy_fine_j"]) == pytest.approx(m.energy.energy_fine_j)
+    assert table[0]["rms_urad"] == ""                       # jitter not asked for
+
+
+def test_an_unreadable_log_is_a_row_with_its_error(sim_log, tmp_path, capsys):
+    bad = tmp_path / "broken.h5"
+    bad.write_bytes(b"")
+    assert main(["analyze", str(sim_log), str(bad), "--json", "--psd-segment", "1"]) == 1
+    rows = json.loads(capsys.readouterr().out)
+    assert [r["log"] for r in rows] == [sim_log.name, "broken.h5"]
+    assert rows[0]["error"] == "" and "damaged log" in rows[1]["error"] and rows[1]["rms_urad"] is None
+    assert main(["analyze", str(bad)]) == 1
+    out = capsys.readouterr().out
+    assert "broken.h5: error:" in out and "empty (0 bytes)" in out
+
+
+def test_bad_arguments_exit_2(sim_log, capsys):
+    for args in (["--metrics", "jitter,bode"], ["--sensor", "gyro_rate"],
+                 ["--integration-period", "0"], ["--json", "--csv"]):
+        with pytest.raises(SystemExit) as exc:
+            main(["analyze", str(sim_log), *args])
+        assert exc.value.code == 2, args
+    capsys.readouterr()
+    assert main(["analyze", str(sim_log), "--from", "3", "--to", "1"]) == 2
+    assert "--from 3 s is after --to 1 s" in capsys.readouterr().err
+    assert main(["analyze", str(sim_log), "--testbed", "no/such/testbed.toml"]) == 2
+    assert "testbed file not found" in capsys.readouterr().err
+
+
+def test_the_cli_plots_the_spectrum(sim_log, tmp_path, capsys):
+    png = tmp_path / "psd.png"
+    assert main(["analyze", str(sim_log), "--metrics", "energy", "--plot", str(png),
+                 "--psd-segment", "1"]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert f"plot: {png}" in capsys.readouterr().err
+
+
+def test_the_cli_choices_are_the_analysis_ones():
+    assert cli_analysis.METRICS == log_metrics.METRICS
+    assert cli_analysis.SENSORS == log_metrics.SENSORS
+    assert cli_analysis.SENSORS[0] == log_metrics.DEFAULT_SENSOR
