@@ -3,7 +3,7 @@ lists what is wrong with a campaign file.  No I/O and no knowledge of the action
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,6 +40,27 @@ class Step:
         return f"{head} step {self.position} ({self.action})"
 
 
+@dataclass(frozen=True)
+class AnalysisSpec:
+    """A campaign's optional `[analysis]` table: how its logs are scored after the runs
+    (campaign/metrics.py).  Without the table every log is scored over its whole length
+    with the defaults and nothing is compared."""
+
+    start_after_mark: str = ""           # the scored window starts at this mark ('' : the log's start)
+    duration_s: float | None = None      # window length (None: to the log's end)
+    sensor: str = "autocollimator"
+    integration_period_s: float = 1.0
+    group_by: str = ""                   # a matrix key: one comparison per value
+    compare: str = ""                    # a matrix key: the values compared in each group
+    baseline: Any = None                 # the value of `compare` (as in [matrix]) others are relative to
+    given: bool = False                  # the file has an [analysis] table
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"start_after_mark": self.start_after_mark, "duration_s": self.duration_s,
+                "sensor": self.sensor, "integration_period_s": self.integration_period_s,
+                "group_by": self.group_by, "compare": self.compare, "baseline": self.baseline}
+
+
 @dataclass
 class Campaign:
     path: Path
@@ -50,3 +71,4 @@ class Campaign:
     steps: list[Step]
     runs: int
     on_run_failure: str = "stop"
+    analysis: AnalysisSpec = field(default_factory=AnalysisSpec)

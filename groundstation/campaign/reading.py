@@ -5,6 +5,7 @@ action's handler (`actions.ACTIONS`).  Nothing here connects or sends anything."
 from __future__ import annotations
 
 import itertools
+import math
 import re
 from pathlib import Path
 from typing import Any
@@ -12,8 +13,12 @@ from typing import Any
 from ..errors import GroundStationError
 from ..tomlfile import read_toml
 from .actions import ACTIONS, PATH_KEYS, known_actions
-from .checks import CampaignChecker
-from .model import Campaign, CampaignError, Step
+from .checks import CampaignChecker, show
+from .model import AnalysisSpec, Campaign, CampaignError, Step
+
+#: the keys of the optional [analysis] table (campaign/metrics.py scores the logs with them)
+ANALYSIS_KEYS = ("start_after_mark", "duration_s", "sensor", "integration_period_s", "group_by",
+                 "compare", "baseline")
 
 
 def load_campaign(path: str | Path, dictionary=None) -> Campaign:
@@ -39,10 +44,10 @@ def read_campaign(path: str | Path, dictionary=None) -> tuple[Campaign | None, l
     testbed = (path.parent / _text_field(head, "testbed", path, "[campaign]")).resolve()
     if not testbed.is_file():
         raise CampaignError(f"{path}: [campaign] testbed: no file {testbed}")
-    unknown = set(doc) - {"campaign", "matrix", "setup", "run", "teardown"}
+    unknown = set(doc) - {"campaign", "matrix", "setup", "run", "teardown", "analysis"}
     if unknown:
         raise CampaignError(f"{path}: unknown table(s) {sorted(unknown)} (known: campaign, matrix, "
-                            f"setup, run, teardown)")
+                            f"setup, run, teardown, analysis)")
     matrix = doc.get("matrix", {})
     if not isinstance(matrix, dict) or any(not isinstance(v, list) or not v for v in matrix.values()):
         raise CampaignError(f"{path}: [matrix] values must be non-empty lists")
@@ -70,10 +75,121 @@ def read_campaign(path: str | Path, dictionary=None) -> tuple[Campaign | None, l
         if raw["run"]:
             add("run", run, raw["run"], combo)
     add("teardown", 0, raw["teardown"], {})
+    runs = len(combos) if raw["run"] else 0
+    analysis = read_analysis(doc.get("analysis"), path, name, matrix, combos[:runs], steps, problems)
     campaign = Campaign(path, name, str(head.get("description", "")), testbed, matrix, steps,
-                        len(combos) if raw["run"] else 0, policy)
+                        runs, policy, analysis)
     problems += check_campaign(campaign, dictionary)
     return campaign, problems
+
+
+def read_analysis(table: Any, path: Path, name: str, matrix: dict[str, list[Any]],
+                  combos: list[dict[str, Any]], steps: list[Step], problems: list[str]) -> AnalysisSpec:
+    """The [analysis] table checked (problems appended, worded as the steps' are:
+    "FILE: [analysis] duration_s = -5 - must be a finite number > 0"); the defaults where
+    a value is absent or refused.  No table: the defaults, `given` False."""
+    if table is None:
+        return AnalysisSpec()
+    head = f"{path.name}: [analysis]"
+    if not isinstance(table, dict):
+        problems.append(f"{head} must be a table ([analysis] with keys {', '.join(ANALYSIS_KEYS)})")
+        return AnalysisSpec(given=True)
+    found: list[str] = []
+
+    def bad(key: str, text: str) -> None:
+        found.append(f"{head} {key} = {show(table[key])} - {text}")
+
+    unknown = sorted(set(table) - set(ANALYSIS_KEYS))
+    if unknown:
+        found.append(f"{head}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(ANALYSIS_KEYS)})")
+    values: dict[str, Any] = {}
+    for key in ("duration_s", "integration_period_s"):
+        if key in table:
+            v = table[key]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                bad(key, "must be a finite number > 0 (seconds)")
+            else:
+                values[key] = float(v)
+    if "sensor" in table:
+        from ..analysis import SENSORS            # the log adapter (numpy, h5py): only here
+        if table["sensor"] not in SENSORS:
+            bad("sensor", f"not a scored sensor (one of {', '.join(SENSORS)})")
+        else:
+            values["sensor"] = table["sensor"]
+    keys = list(matrix)
+    for key in ("group_by", "compare"):
+        if key in table:
+            v = table[key]
+            if not isinstance(v, str) or v not in matrix:
+                bad(key, f"must name a key of [matrix] ({', '.join(keys) or 'the file has no matrix'})")
+            else:
+                values[key] = v
+    if values.get("group_by") and values.get("group_by") == values.get("compare"):
+        bad("compare", "must be another matrix key than group_by (the groups hold the values compared)")
+        values.pop("compare")
+    if "baseline" in table:
+        compare = values.get("compare")
+        if "compare" not in table:
+            bad("baseline", "needs compare = MATRIX_KEY (the key whose values the baseline is one of)")
+        elif compare:
+            v = table["baseline"]
+            hits = [x for x in matrix[compare]
+                    if x == v or (isinstance(x, str) and isinstance(v, str) and Path(x).stem == v)]
+            shown = ", ".join(show(x) for x in matrix[compare])
+            if not hits:
+                bad("baseline", f"not a value of [matrix] {compare} (as written, or a file's "
+                                f"name without its extension): {shown}")
+            elif len(hits) > 1:
+                bad("baseline", f"names {len(hits)} values of [matrix] {compare}: give the path "
+                                f"as written in [matrix]")
+            else:
+                values["baseline"] = hits[0]
+    if "start_after_mark" in table:
+        v = table["start_after_mark"]
+        if not isinstance(v, str) or not v.strip():
+            bad("start_after_mark", "must be text: the text (or the start of the text) of a "
+                                    "mark step")
+        else:
+            problem = _mark_problem(v, name, combos, steps)
+            if problem:
+                bad("start_after_mark", problem)
+            else:
+                values["start_after_mark"] = v
+    problems += found
+    if values.get("compare") and "baseline" not in values:
+        values["baseline"] = matrix[values["compare"]][0]       # the first value, as the matrix lists it
+    return AnalysisSpec(given=True, **values)
+
+
+def _mark_problem(text: str, name: str, combos: list[dict[str, Any]], steps: list[Step]) -> str:
+    """Why no mark of some run would start the window ('' : every run has one)."""
+    marks: dict[int, list[str]] = {}
+    for s in steps:
+        if s.action == "mark" and isinstance(s.args.get("text"), str):
+            marks.setdefault(s.run, []).append(s.args["text"])
+    shared = marks.get(0, [])       # setup and teardown marks go into whatever log is recording then
+    for run, combo in enumerate(combos or [{}], 1):
+        try:
+            target = text.format(**run_names(name, run if combos else 0, combo))
+        except (KeyError, IndexError, ValueError) as exc:
+            return (f"unknown or bad placeholder {exc} (known: "
+                    f"{', '.join(sorted(run_names(name, run, combo)))})")
+        texts = marks.get(run, []) + shared
+        if not any(target in t for t in texts):
+            where = f"run {run}" if combos else "the campaign"
+            return (f"no mark step of {where} has this text" + (f" (its marks: {', '.join(map(repr, texts))})"
+                                                                if texts else " (it has no mark step)"))
+    return ""
+
+
+def run_names(campaign: str, run: int, variables: dict[str, Any]) -> dict[str, Any]:
+    """The placeholders of a run's text values: {campaign}, {run}, every matrix key and
+    {KEY_stem} of each text value."""
+    names = {"campaign": campaign, "run": run, **variables}
+    for k, v in variables.items():
+        if isinstance(v, str):
+            names[f"{k}_stem"] = Path(v).stem
+    return names
 
 
 def _problems_text(path: Path, problems: list[str]) -> str:
@@ -113,10 +229,7 @@ def _step(item: dict, problems: list[str], index: int, phase: str, run: int, pos
         problems.append(f"{where}: unknown key(s) {', '.join(sorted(keys - allowed))}"
                         f" (allowed: {', '.join(sorted(allowed)) or 'none'})")
         ok = False
-    names = {"campaign": campaign, "run": run, **variables}
-    for k, v in variables.items():
-        if isinstance(v, str):
-            names[f"{k}_stem"] = Path(v).stem
+    names = run_names(campaign, run, variables)
     args = {}
     for k, v in item.items():
         if k == "action":

@@ -1,6 +1,11 @@
 """Running a checked campaign on an open Testbed, step by step: each step is done by its
 action's handler (`actions.ACTIONS`); a failure, an abort or Ctrl-C ends the campaign
-with the rig made safe, or - with on_run_failure = "next_run" - ends only that run."""
+with the rig made safe, or - with on_run_failure = "next_run" - ends only that run.
+
+Every recording the report lists carries the run it ended in ("run": 1, 2, ...; 0 in
+setup or teardown) and that run's matrix values ("variables": each matrix key and, for
+a text value, its KEY_stem), so that the logs' metrics can be grouped by them
+(campaign/metrics.py) - recordings closed by a failure or Ctrl-C as well."""
 
 from __future__ import annotations
 
@@ -9,6 +14,7 @@ import signal
 import threading
 import time
 import traceback
+from pathlib import Path
 from typing import Any, Callable
 
 from ..clock import ScriptAborted
@@ -27,6 +33,8 @@ class CampaignRunner:
         self.tb = testbed
         self.max_step_seconds = max_step_seconds
         self.progress = progress or (lambda step, fraction: None)
+        self._tags: dict[int, dict[str, Any]] = {}     # index in tb.recordings -> run, variables
+        self._tagged = 0                                # tb.recordings[:_tagged] have their tags
 
     def run(self, resume: CampaignReport | None = None) -> CampaignReport:
         """Run the steps; returns the report whatever happens.  Ctrl-C (KeyboardInterrupt
@@ -38,7 +46,7 @@ class CampaignRunner:
         if resume:
             report.completed_runs = sorted(skip_runs)
             report.recordings = list(resume.recordings)
-        recordings_before = len(self.tb.recordings)
+        recordings_before = self._tagged = len(self.tb.recordings)
         current_run, run_failed = 0, False
         step: Step | None = None
         try:
@@ -64,10 +72,14 @@ class CampaignRunner:
                     report.steps.append(StepResult(step.index, step.label(), status,
                                                    time.monotonic() - t0, _reason(exc)))
                     run_failed = True
+                    self._tag(step)
                     if step.run and status == "failed" and c.on_run_failure == "next_run" \
                             and isinstance(exc, GroundStationError):
                         report.failed_runs[str(step.run)] = f"{step.label()}: {_reason(exc)}"
-                        self.tb.recover(f"run {step.run} failed: {_reason(exc)}")
+                        try:
+                            self.tb.recover(f"run {step.run} failed: {_reason(exc)}")
+                        finally:
+                            self._tag(step)          # the run's recording, closed by recover
                         continue
                     report.status = status
                     report.failed_step, report.failed_run = step.index, step.run or None
@@ -76,6 +88,7 @@ class CampaignRunner:
                         report.reason += "\n" + traceback.format_exc()
                     break
                 report.steps.append(StepResult(step.index, step.label(), "done", time.monotonic() - t0))
+                self._tag(step)
                 self.progress(step, 1.0)
             else:
                 if current_run and not run_failed:
@@ -95,13 +108,26 @@ class CampaignRunner:
                     report.status = "failed"
                 with _interrupts_deferred():        # a second Ctrl-C must not cut this short
                     self.tb.make_safe(report.reason.splitlines()[0] if report.reason else "campaign stopped")
+            self._tag(step)                         # what make_safe closed: the run it stopped in
             report.recordings += self._recordings(recordings_before)
             report.completed_runs = sorted(set(report.completed_runs))
             report.finished = time.time()
         return report
 
+    def _tag(self, step: Step | None) -> None:
+        """The recordings that ended since the last call belong to `step`'s run."""
+        recordings = self.tb.recordings
+        tags = run_tags(self.campaign, step)
+        for i in range(self._tagged, len(recordings)):
+            self._tags[i] = tags
+        self._tagged = max(self._tagged, len(recordings))
+
     def _recordings(self, since: int) -> list[dict[str, Any]]:
-        return [dict(rec) for rec in self.tb.recordings[since:]]
+        out = []
+        for i, rec in enumerate(list(self.tb.recordings[since:]), since):
+            tags = self._tags.get(i, {"run": 0, "variables": {}})
+            out.append({**rec, "run": tags["run"], "variables": dict(tags["variables"])})
+        return out
 
     def _do(self, step: Step) -> None:
         """Do one step with its action's handler (the GUI's runner wraps this)."""
@@ -128,6 +154,21 @@ def _interrupts_deferred():
         yield
     finally:
         signal.signal(signal.SIGINT, previous)
+
+
+def run_tags(campaign: Campaign, step: Step | None) -> dict[str, Any]:
+    """{"run": N, "variables": {KEY: value, KEY_stem: stem}} of `step`'s run: the matrix
+    keys only (0 and {} in setup and teardown)."""
+    if step is None or not step.run:
+        return {"run": 0, "variables": {}}
+    variables: dict[str, Any] = {}
+    for key in campaign.matrix:
+        if key in step.variables:
+            value = step.variables[key]
+            variables[key] = value
+            if isinstance(value, str):
+                variables[f"{key}_stem"] = Path(value).stem
+    return {"run": step.run, "variables": variables}
 
 
 def _reason(exc: BaseException) -> str:
