@@ -2,7 +2,14 @@
 
     groundstation campaign show FILE                  the steps, expanded over the matrix
     groundstation campaign run FILE [--device sim|ADDRESS] [--fast] [--log-folder DIR]
-                                    [--report FILE.json] [--resume FILE.json]
+                                    [--report FILE.json] [--resume FILE.json] [--no-analysis]
+    groundstation campaign report REPORT.json [--html-only] [--campaign FILE]
+                                    the logs' metrics and comparison, again from a saved report
+
+After a run (unless --no-analysis) every log is scored - jitter, control energy - over
+the window the campaign's [analysis] table asks for, and compared as it asks; the
+metrics (CSV, JSON), bar charts (PNG) and a self-contained HTML page are written beside
+the report (campaign/metrics.py).
 
 Exit codes: 0 completed, 1 a step failed or the operator aborted (the device was made
 safe and the report says which step and why), 2 the campaign file is malformed or asks
@@ -64,7 +71,25 @@ def add_parsers(sub) -> argparse._SubParsersAction:
                         "a base-motion profile keeps its period)")
     s.add_argument("--seed", type=int, default=0, help="simulator seed")
     s.add_argument("--take-over", action="store_true", help="end another host's session")
+    s.add_argument("--no-analysis", action="store_true",
+                   help="do not score the logs after the run (no metrics, charts or HTML)")
     s.set_defaults(func=_cmd_run)
+    s = actions.add_parser("report", help="score a campaign's logs again from its saved report",
+                           description="Reads REPORT.json (written by `campaign run`), scores "
+                                       "every log it lists (jitter, control energy) over the "
+                                       "window of the campaign file's [analysis] table, and "
+                                       "writes beside the report: NAME.metrics.csv, "
+                                       "NAME.metrics.json, the bar charts NAME.jitter.png, "
+                                       "NAME.energy.png, NAME.relative.png, NAME.html "
+                                       "(self-contained) and NAME.txt.  Exit 0: every log "
+                                       "scored; 1: some could not be (their rows say why); "
+                                       "2: the report or the [analysis] table is unusable.")
+    s.add_argument("report", metavar="REPORT.json")
+    s.add_argument("--html-only", action="store_true", help="write the HTML page only")
+    s.add_argument("--campaign", default=None,
+                   help="the campaign file (default: the one the report names), for its "
+                        "[analysis] table and matrix")
+    s.set_defaults(func=_cmd_report)
     return actions
 
 
@@ -179,6 +204,64 @@ def _cmd_run(args) -> int:
     print(report.summary())
     print(f"report: {report_path} (and {report_path.with_suffix('.txt').name}); "
           f"{time.monotonic() - t0:.1f} s")
+    if not args.no_analysis and report.recordings:
+        _write_metrics(report, report_path, c)
     if report.status == "interrupted":
         return EXIT_INTERRUPTED
     return EXIT_OK if report.status == "completed" else EXIT_FAILED
+
+
+def _write_metrics(report, report_path: Path, campaign, *, html_only: bool = False,
+                   folder: Path | None = None):
+    """Score the report's logs and write the outputs beside it; the metrics, or None
+    when they could not be written (said why)."""
+    from .campaign.metrics import campaign_metrics, write_metrics
+
+    t0 = time.monotonic()
+    try:
+        metrics = campaign_metrics(report, campaign, folder=folder)
+        written = write_metrics(metrics, report, report_path, html_only=html_only)
+    except (GroundStationError, OSError, ImportError) as exc:
+        print(f"error: the metrics could not be written: {exc}", file=sys.stderr)
+        return None
+    print(metrics.text())
+    print(f"metrics: {', '.join(p.name for p in written)} in {report_path.parent}; "
+          f"{time.monotonic() - t0:.1f} s")
+    return metrics
+
+
+def _cmd_report(args) -> int:
+    from .campaign import CampaignReport, read_campaign
+    from .dictionary import load_dictionary
+
+    report_path = Path(args.report)
+    try:
+        report = CampaignReport.load(report_path)
+    except GroundStationError as exc:
+        _print_problems(exc)
+        return EXIT_MALFORMED
+    source = Path(args.campaign or report.file)
+    campaign = None
+    try:
+        campaign, problems = read_campaign(source, load_dictionary(getattr(args, "protocol_dir", None)))
+    except GroundStationError as exc:
+        problems = []
+        if args.campaign:                       # asked for by name: it must load
+            _print_problems(exc)
+            return EXIT_MALFORMED
+        print(f"warning: the campaign file {source} cannot be read ({str(exc).splitlines()[0]}): "
+              f"every log is scored whole, nothing is compared (give --campaign FILE)",
+              file=sys.stderr)
+    mine = [p for p in problems if ": [analysis]" in p]
+    if mine:
+        for p in mine:
+            print(f"error: {p}", file=sys.stderr)
+        return EXIT_MALFORMED
+    if not report.recordings:
+        print(f"{report_path}: the report lists no recordings: nothing to score", file=sys.stderr)
+        return EXIT_FAILED
+    metrics = _write_metrics(report, report_path, campaign, html_only=args.html_only,
+                             folder=report_path.parent)
+    if metrics is None:
+        return EXIT_FAILED
+    return EXIT_FAILED if any(r["error"] for r in metrics.rows) else EXIT_OK

@@ -230,12 +230,26 @@ class CampaignController(QObject):
         except OSError as exc:
             self._echo(f"the report could not be saved to {path}: {exc}")
             path = None
+        if path is not None and report.recordings:
+            self._write_metrics(report, path, campaign)
         outcome = CampaignOutcome(report, path, folder, self.abort_requested)
         self.last = outcome
         if session.generator.is_open:          # the panel shows what the instrument holds now
             state = session.generator.state
             session.generator.refresh(state.channel if state is not None else 1)
         self.sig_finished.emit(outcome)
+
+    def _write_metrics(self, report: CampaignReport, path: Path, campaign: Campaign) -> None:
+        """The logs scored and compared, written beside the report as `campaign run`
+        writes them (metrics CSV/JSON, charts, HTML); on this worker thread."""
+        from ..campaign.metrics import campaign_metrics, write_metrics
+        try:
+            written = write_metrics(campaign_metrics(report, campaign), report, path)
+        except Exception as exc:              # the campaign's result stands without them
+            log.exception("campaign metrics")
+            self._echo(f"the metrics could not be written: {type(exc).__name__}: {exc}")
+            return
+        self._echo(f"metrics: {', '.join(p.name for p in written)}")
 
     # ------------------------------------------------------------------ the Testbed's callbacks
     def _echo(self, text: str) -> None:
