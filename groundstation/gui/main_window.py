@@ -11,6 +11,7 @@ from PySide6.QtWidgets import (QDockWidget, QFileDialog, QLabel, QMainWindow, QM
                                QPushButton, QToolBar)
 
 from ..plant.testbed import TESTBEDS_DIR
+from .analysis_panel import AnalysisPanel
 from .campaign_panel import CampaignPanel
 from .channel_tree import ChannelTree
 from .charts import StripChartPanel
@@ -66,6 +67,7 @@ class MainWindow(QMainWindow):
         self.profiles.sig_abort.connect(self.abort)
         self.campaign = CampaignPanel(session)
         self.campaign.sig_abort.connect(self.abort)
+        self.analysis = AnalysisPanel(session)
         # the one-click demo on the simulated testbed (through the two docks above)
         self.demo = DemoController(session, self.parameters, self.profiles, self.charts, parent=self)
         self.docks = {}
@@ -78,7 +80,8 @@ class MainWindow(QMainWindow):
                                    ("Parameters", self.parameters, Qt.DockWidgetArea.BottomDockWidgetArea),
                                    ("Generator", self.generator, Qt.DockWidgetArea.BottomDockWidgetArea),
                                    ("Profiles", self.profiles, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Campaign", self.campaign, Qt.DockWidgetArea.BottomDockWidgetArea)):
+                                   ("Campaign", self.campaign, Qt.DockWidgetArea.BottomDockWidgetArea),
+                                   ("Analysis", self.analysis, Qt.DockWidgetArea.BottomDockWidgetArea)):
             dock = QDockWidget(name)
             dock.setObjectName(name.lower().replace(" ", "_"))
             dock.setWidget(widget)
@@ -89,6 +92,7 @@ class MainWindow(QMainWindow):
         self.tabifyDockWidget(self.docks["Events"], self.docks["Generator"])
         self.tabifyDockWidget(self.docks["Events"], self.docks["Profiles"])
         self.tabifyDockWidget(self.docks["Events"], self.docks["Campaign"])
+        self.tabifyDockWidget(self.docks["Events"], self.docks["Analysis"])
         self.docks["Events"].raise_()
         # the limit table's channel names in full by default (a saved layout wins)
         self.status_panel.refresh()
@@ -143,6 +147,10 @@ class MainWindow(QMainWindow):
         m.addSeparator()
         action(m, "Play &profile...", self._play_profile_dialog, "Ctrl+P")
         action(m, "Run &campaign...", self._run_campaign_dialog, "Ctrl+K")
+        m = self.menuBar().addMenu("&Analysis")
+        action(m, "&Analyse logs", lambda: self._show_dock("Analysis"), "Ctrl+Shift+A")
+        action(m, "Add log &file...", self._analysis_files_dialog)
+        action(m, "Add log f&older...", self._analysis_folder_dialog)
         m = self.menuBar().addMenu("D&emo")
         m.addAction(self.demo_action)
         m = self.menuBar().addMenu("&View")
@@ -223,6 +231,14 @@ class MainWindow(QMainWindow):
         self._show_dock("Campaign")
         self.campaign.load_dialog()
 
+    def _analysis_files_dialog(self) -> None:
+        self._show_dock("Analysis")
+        self.analysis.files_dialog()
+
+    def _analysis_folder_dialog(self) -> None:
+        self._show_dock("Analysis")
+        self.analysis.folder_dialog()
+
     def _campaign_running(self, running: bool) -> None:
         for button in self.commands.findChildren(QPushButton):
             if button is not self.commands.abort_button:
@@ -295,5 +311,6 @@ class MainWindow(QMainWindow):
 
     def closeEvent(self, event) -> None:
         self.save()
+        self.analysis.shutdown()
         self.session.shutdown()
         super().closeEvent(event)
