@@ -7,7 +7,8 @@
     groundstation record --folder logs     record a session to HDF5 (see cli_logs.py)
     groundstation params validate|upload|show|rollback   controller designs (see cli_params.py)
     groundstation profile show|play FILE   command profiles (see cli_profile.py)
-    groundstation campaign show|run FILE   scripted test campaigns (see cli_campaign.py)
+    groundstation campaign show|run FILE   scripted test campaigns, scored and compared (cli_campaign.py)
+    groundstation campaign report REPORT.json   the metrics, charts and HTML again from the logs
     groundstation fg list|identify|set|upload|off   the base-motion generator (cli_fg.py)
     groundstation analyze LOG...           jitter, control energy, PSD of logs (cli_analysis.py)
 """

@@ -47,7 +47,11 @@ The package, one job per module:
 - `checks`: the helpers the value checks are written with (StepCheck);
 - `reading`: the file read, the matrix expanded, every step checked (load_campaign);
 - `runner`: the steps run on a Testbed, failures and Ctrl-C made safe (CampaignRunner);
-- `report`: what a run leaves (CampaignReport, StepResult).
+- `report`: what a run leaves (CampaignReport, StepResult);
+- `metrics`: every run's log scored with groundstation.analysis, grouped and compared
+  with a baseline as the campaign's optional `[analysis]` table says (CSV, JSON, text);
+- `report_figures`: the comparison's bar charts (matplotlib, PNG) and the
+  self-contained HTML report.
 
 Everything is importable from `groundstation.campaign` as before the split.
 """
