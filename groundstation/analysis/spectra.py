@@ -124,13 +124,14 @@ class _Periodograms:
             return np.zeros(len(self.frequency_hz)), 0
         out = np.zeros(len(self.frequency_hz))
         segs = np.lib.stride_tricks.sliding_window_view(x, self.nperseg)[::self.step][:k]
-        # batches of segments bound the temporary arrays (a few MB) whatever the piece
-        per = max(1, (1 << 21) // self.nperseg)
+        # batches of ~2^18 samples bound the temporaries (~10 MB) whatever the piece
+        per = max(1, (1 << 18) // self.nperseg)
         for i in range(0, k, per):
             s = segs[i:i + per]
-            s = (s - s.mean(axis=1, keepdims=True)) * self.window
+            s = s - s.mean(axis=1, keepdims=True)
+            s *= self.window
             spec = np.fft.rfft(s, axis=1)
-            out += (spec.real ** 2 + spec.imag ** 2).sum(axis=0)
+            out += np.einsum("ij,ij->j", spec.real, spec.real) + np.einsum("ij,ij->j", spec.imag, spec.imag)
         return out * self.scale, k
 
 
