@@ -296,3 +296,19 @@ def test_the_cli_choices_are_the_analysis_ones():
     assert cli_analysis.METRICS == log_metrics.METRICS
     assert cli_analysis.SENSORS == log_metrics.SENSORS
     assert cli_analysis.SENSORS[0] == log_metrics.DEFAULT_SENSOR
+
+
+def test_a_sensor_that_never_moves_is_not_scored_as_perfect(tmp_path):
+    """The relative rig has no autocollimator: its channel reads one constant.  That is
+    no jitter figure (not 0 urad), with the reason and the sensor to choose instead."""
+    with Testbed("sim", testbed=ROOT / "profiles/testbeds/relative_2dof.toml", fast=True,
+                 generator=None, log_folder=tmp_path, history=tmp_path / "history") as tb:
+        tb.start_recording("no autocollimator")
+        tb.dwell(1.0)
+        log = Path(tb.stop_recording()["files"][0])
+    m = analyze_log(log)
+    assert m.jitter is None and m.spectrum is None and m.energy is not None
+    assert any("autocollimator reads one constant value" in n and "--sensor encoder_inner" in n
+               for n in m.notes)
+    inner = analyze_log(log, sensor="encoder_inner")
+    assert inner.jitter is not None and inner.jitter.std_rad > 0

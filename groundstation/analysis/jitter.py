@@ -308,6 +308,10 @@ class JitterAccumulator:
         self._hp2 = 0.0
         self._var_sum = 0.0
         self._windows = 0
+        #: the smallest and largest usable sample: equal means the sensor never moved
+        #: (a sensor not fitted on this set-up reads one constant)
+        self.lowest = math.inf
+        self.highest = -math.inf
         self._open = False                 # the last sample fed is part of a stretch still open
         self._zf: np.ndarray | None = None  # the open stretch's filter state
         self._tail = np.zeros(0)           # its last n_win - 1 samples (windows across pieces)
@@ -324,6 +328,8 @@ class JitterAccumulator:
             if self._shift is None:
                 self._shift = float(used[0])
             u = used - self._shift
+            self.lowest = min(self.lowest, float(used.min()))
+            self.highest = max(self.highest, float(used.max()))
             self.n += len(u)
             self._s1 += float(u.sum())
             self._s2 += float(np.dot(u, u))

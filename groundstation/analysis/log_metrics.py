@@ -343,6 +343,12 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
     # what the data do not allow (every sample excluded, no stretch long enough for a PSD
     # segment) leaves that figure out with the reason; the others still stand
     jitter = spectrum = None
+    if jit is not None and jit.n and jit.lowest == jit.highest:
+        # every sample the same value: nothing measured, not a perfect line of sight
+        notes.append(f"no jitter or PSD: the {sensor} reads one constant value "
+                     f"({jit.lowest:.6g} rad) over all {jit.n} samples - is it fitted on this "
+                     f"set-up? (a relative rig has no autocollimator: --sensor encoder_inner)")
+        jit = welch = None
     if jit is not None:
         try:
             jitter = jit.result(sensor, missing_frames=missing, exclusion_rule=rule)
