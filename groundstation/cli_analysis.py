@@ -1,4 +1,5 @@
-"""`groundstation analyze LOG...`: LOS jitter, control energy and spectra of recorded logs.
+"""`groundstation analyze LOG...`: LOS jitter, control energy and spectra of recorded logs,
+and on request a step response, a frequency response and a hysteresis loop of each.
 
 Argument parsing imports only the standard library; numpy, scipy and h5py come with the
 command (groundstation.analysis), matplotlib only with --plot.
@@ -16,6 +17,13 @@ from pathlib import Path
 # the analysis package's choices, repeated here so that parsing needs no numpy
 # (tests/test_analysis_log.py checks they are the same)
 METRICS = ("jitter", "energy", "psd")
+#: asked for by name only (not in the default): analysis/log_identification.py
+EXTRA_METRICS = ("step", "frf", "hysteresis")
+ALL_METRICS = METRICS + EXTRA_METRICS
+FRF_INPUTS = ("current_coarse", "torque_coarse_cmd", "current_fine", "torque_fine_cmd")
+FRF_OUTPUTS = ("encoder_outer", "encoder_inner", "gyro_rate", "autocollimator", "los_estimate")
+#: coherence at or above which a frequency-response bin counts (log_identification's)
+MIN_COHERENCE = 0.9
 SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
 
 EPILOG = """The window (--from/--to) is in seconds of device time from the start of each log.
@@ -25,7 +33,12 @@ variance within T, averaged over every window position).  Samples the scored sen
 could not measure (out of range, at the A/D rail) are excluded and counted.  Energy is
 i^2 R of each motor (R from the testbed file recorded in the log, or --testbed),
 integrated over the frames received; frames missing from the log are counted, not
-bridged.  See docs/analysis.md.
+bridged.
+Asked for by name: step (response = reference - error_angle, the angle the mode
+controls; the step is the reference's largest jump between frames in the window), frf
+(H1 of --frf-input to --frf-output against the testbed model, compared over the bins with
+coherence >= 0.9) and hysteresis (the friction loop of a triangle test; --slope-table
+writes the identified DB-DHM table).  See docs/analysis.md.
 exit status: 0 every figure asked for was computed for every log; 1 a log could not
 be analysed, or a figure could not be computed from its data (the lines under the table
 say why); 2 bad arguments."""
@@ -52,15 +65,23 @@ ROW_KEYS = ["log", "path", "test_name", "from_s", "to_s", "frames", "missing_fra
             "rms_urad", "std_urad", "highpass_rms_urad", "smear_rms_urad", "energy_coarse_j",
             "energy_fine_j", "energy_total_j", "rms_current_coarse_a", "rms_current_fine_a",
             "saturated_coarse_pct", "saturated_fine_pct", "psd_rms_urad", "psd_resolution_hz",
-            "psd_segments", "notes", "error"]
+            "psd_segments",
+            "step_time_s", "step_size_urad", "step_rise_s", "step_overshoot_pct",
+            "step_settling_s", "step_steady_state_error_urad", "step_peak_effort",
+            "step_effort_channel",
+            "frf_input", "frf_output", "frf_coherent_from_hz", "frf_coherent_to_hz",
+            "frf_coherent_bins", "frf_rms_db",
+            "hyst_branches", "hyst_complete_branches", "hyst_coulomb_in_oz",
+            "hyst_turnaround_slope_in_oz_per_rad", "hyst_slope_table", "hyst_slope_table_file",
+            "notes", "error"]
 
 
 def _metrics(text: str) -> tuple[str, ...]:
     wanted = tuple(dict.fromkeys(m.strip() for m in text.split(",") if m.strip()))
-    bad = [m for m in wanted if m not in METRICS]
+    bad = [m for m in wanted if m not in ALL_METRICS]
     if bad or not wanted:
         raise argparse.ArgumentTypeError(
-            f"choose one or more of {','.join(METRICS)} (comma-separated), not {text!r}")
+            f"choose one or more of {','.join(ALL_METRICS)} (comma-separated), not {text!r}")
     return wanted
 
 
@@ -91,7 +112,8 @@ def add_parsers(sub) -> None:
                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("logs", nargs="+", metavar="LOG", help="recorded log(s) (.h5)")
     s.add_argument("--metrics", type=_metrics, default=METRICS,
-                   help=f"comma-separated, from {','.join(METRICS)} (default: all)")
+                   help=f"comma-separated, from {','.join(ALL_METRICS)} "
+                        f"(default: {','.join(METRICS)})")
     s.add_argument("--from", dest="start", type=_seconds, default=None,
                    help="window start, s of device time from the log's start (default: its start)")
     s.add_argument("--to", dest="stop", type=_seconds, default=None,
@@ -106,6 +128,13 @@ def add_parsers(sub) -> None:
     s.add_argument("--testbed", default=None, metavar="FILE",
                    help="testbed file for the autocollimator range and motor resistances "
                         "(default: the one recorded in each log)")
+    s.add_argument("--frf-input", choices=FRF_INPUTS, default=FRF_INPUTS[0],
+                   help="frf: the input channel (default current_coarse)")
+    s.add_argument("--frf-output", choices=FRF_OUTPUTS, default=FRF_OUTPUTS[0],
+                   help="frf: the output channel (default encoder_outer)")
+    s.add_argument("--slope-table", default=None, metavar="OUT.csv",
+                   help="write the DB-DHM slope table hysteresis identifies (implies "
+                        "--metrics hysteresis; several logs: OUT_<log>.csv each)")
     out = s.add_mutually_exclusive_group()
     out.add_argument("--json", action="store_true", help="one JSON record per log, to stdout")
     out.add_argument("--csv", action="store_true", help="one CSV row per log, to stdout")
@@ -124,20 +153,29 @@ def _cmd_analyze(args) -> int:
     from .plant.testbed import load_testbed
 
     testbed = load_testbed(args.testbed) if args.testbed else None    # a bad file: exit 2
-    metrics = args.metrics
+    extras = tuple(m for m in args.metrics if m in EXTRA_METRICS)
+    if args.slope_table and "hysteresis" not in extras:
+        extras += ("hysteresis",)
+    metrics = tuple(m for m in args.metrics if m in METRICS)
     if args.plot and "psd" not in metrics:
         metrics = metrics + ("psd",)
     results = []
+    extra_results = []
     for name in args.logs:
-        try:
-            m = analyze_log(name, metrics=metrics, start_s=args.start, stop_s=args.stop,
-                            sensor=args.sensor, integration_period_s=args.integration_period,
-                            testbed=testbed, psd_segment_s=args.psd_segment)
-        except GroundStationError as exc:
-            results.append((name, None, str(exc)))
-        else:
-            results.append((name, m, ""))
-    rows = [_row(name, m, error) for name, m, error in results]
+        m, error = None, ""
+        if metrics:
+            try:
+                m = analyze_log(name, metrics=metrics, start_s=args.start, stop_s=args.stop,
+                                sensor=args.sensor, integration_period_s=args.integration_period,
+                                testbed=testbed, psd_segment_s=args.psd_segment)
+            except GroundStationError as exc:
+                error = str(exc)
+        results.append((name, m, error))
+        # a log that cannot be read at all has that one error, not one per extra metric
+        extra_results.append({} if error else _extras(name, extras, args, testbed))
+    if args.slope_table:
+        _write_slope_tables(Path(args.slope_table), args.logs, extra_results)
+    rows = [_row(name, m, error, ex) for (name, m, error), ex in zip(results, extra_results)]
     if args.json:
         print(json.dumps(rows, indent=2))
     elif args.csv:
@@ -146,9 +184,13 @@ def _cmd_analyze(args) -> int:
         for row in rows:
             w.writerow({k: "" if v is None else v for k, v in row.items()})
     else:
-        _print_table(rows, args.metrics, results)
+        if metrics:
+            _print_table(rows, args.metrics, results)
+        _print_extras(rows, extra_results)
     # a figure asked for but not computable (all samples excluded, no PSD segment) fails too
-    failed = any(error or m.missing_metrics for _, m, error in results)
+    failed = any(error or (m is not None and m.missing_metrics) for _, m, error in results)
+    failed = failed or any(isinstance(v, str) for ex in extra_results
+                           for k, v in ex.items() if k in EXTRA_METRICS)
     if args.plot:
         spectra = [(m.path.name, m.spectrum) for _, m, _ in results if m is not None and m.spectrum]
         if spectra:
@@ -160,20 +202,171 @@ def _cmd_analyze(args) -> int:
     return 1 if failed else 0
 
 
-def _row(name: str, m, error: str) -> dict:
+def _extras(name: str, extras: tuple[str, ...], args, testbed) -> dict:
+    """{metric: result, or the error message} of the extra metrics of one log."""
+    from .analysis.log_identification import frf_from_log, hysteresis_from_log, step_from_log
+    from .errors import GroundStationError
+
+    out: dict = {}
+    for metric in extras:
+        try:
+            if metric == "step":
+                out[metric] = step_from_log(name, args.start, args.stop)
+            elif metric == "frf":
+                out[metric] = frf_from_log(name, args.frf_input, args.frf_output, args.start,
+                                           args.stop, testbed=testbed,
+                                           min_coherence=MIN_COHERENCE)
+            else:
+                out[metric] = hysteresis_from_log(name, args.start, args.stop, testbed=testbed)
+        except GroundStationError as exc:
+            out[metric] = str(exc)
+    return out
+
+
+def _write_slope_tables(out: Path, logs: list[str], extra_results: list[dict]) -> None:
+    """Write the slope table of each log whose hysteresis identified one: to `out` for a
+    single log, to out's stem + _<log stem> for several.  A log without one is left alone
+    (its row says why); an unwritable file becomes the log's hysteresis error."""
+    from .analysis.friction_id import write_slope_table
+    from .errors import GroundStationError
+
+    for name, ex in zip(logs, extra_results):
+        h = ex.get("hysteresis")
+        if isinstance(h, str) or h is None or h.identification is None:
+            continue
+        path = out if len(logs) == 1 else out.with_name(f"{out.stem}_{Path(name).stem}{out.suffix}")
+        ident = h.identification
+        comment = (f"DB-DHM slope table identified from {h.path.name} "
+                   f"({h.window_from_s:.3f}..{h.window_to_s:.3f} s, {h.torque_formula}), "
+                   f"T_c {ident.coulomb_torque_in_oz:.4g} in-oz, "
+                   f"sigma {ident.sigma_in_oz_per_rad:g} in-oz/rad")
+        try:
+            ex["hysteresis_file"] = str(write_slope_table(path, ident.x, ident.f, comment=comment))
+        except GroundStationError as exc:
+            ex["hysteresis"] = f"slope table not written: {exc}"
+
+
+def _finite(v) -> float | None:
+    v = float(v)
+    return v if math.isfinite(v) else None
+
+
+def _extra_row(ex: dict) -> tuple[dict, list[str], list[str]]:
+    """(figures, notes, errors) of a log's extra metrics for its row."""
+    import numpy as np
+
+    row: dict = {}
+    notes: list[str] = []
+    errors: list[str] = []
+    for metric, res in ex.items():
+        if metric == "hysteresis_file":
+            continue
+        if isinstance(res, str):
+            errors.append(f"{metric}: {res}")
+            continue
+        notes += [f"{metric}: {n}" for n in res.notes]
+        if metric == "step":
+            s = res.metrics
+            row.update(step_time_s=res.step_time_s, step_size_urad=res.step_size * 1e6,
+                       step_rise_s=_finite(s.rise_time_s),
+                       step_overshoot_pct=_finite(s.overshoot_percent),
+                       step_settling_s=_finite(s.settling_time_s),
+                       step_steady_state_error_urad=_finite(s.steady_state_error * 1e6),
+                       step_peak_effort=_finite(s.peak_effort),
+                       step_effort_channel=res.effort_channel or "")
+        elif metric == "frf":
+            m = res.measured
+            coherent = (m.freq_hz > 0) & (np.nan_to_num(m.coherence) >= MIN_COHERENCE)
+            f = m.freq_hz[coherent]
+            c = res.comparison
+            row.update(frf_input=res.input_channel, frf_output=res.output_channel,
+                       frf_coherent_from_hz=float(f.min()) if f.size else None,
+                       frf_coherent_to_hz=float(f.max()) if f.size else None,
+                       frf_coherent_bins=int(f.size),
+                       frf_rms_db=_finite(c.rms_magnitude_ratio_db)
+                       if c is not None and c.bins_used else None)
+        else:
+            ident = res.identification
+            slopes = np.array([b.turnaround_slope_in_oz_per_rad for b in res.loop.branches])
+            slopes = slopes[np.isfinite(slopes)]
+            row.update(hyst_branches=len(res.loop.branches),
+                       hyst_complete_branches=sum(b.complete for b in res.loop.branches),
+                       hyst_coulomb_in_oz=ident.coulomb_torque_in_oz if ident else None,
+                       hyst_turnaround_slope_in_oz_per_rad=float(np.median(slopes))
+                       if slopes.size else None,
+                       hyst_slope_table=ident is not None,
+                       hyst_slope_table_file=ex.get("hysteresis_file", ""))
+    return row, notes, errors
+
+
+def _row(name: str, m, error: str, ex: dict) -> dict:
     if m is None:
         row = dict.fromkeys(ROW_KEYS)
         row.update(log=Path(name).name, path=str(name), error=error, notes="")
-        return row
-    row = {"path": str(name), **m.row()}
+    else:
+        row = {"path": str(name), **m.row()}
+    figures, notes, errors = _extra_row(ex)
+    row.update(figures)
+    row["notes"] = "; ".join(([row["notes"]] if row.get("notes") else []) + notes)
+    row["error"] = "; ".join(([row["error"]] if row.get("error") else []) + errors)
     return {k: row.get(k) for k in ROW_KEYS}
+
+
+def _ms(v) -> str:
+    return "n/a" if v is None else f"{v * 1e3:.1f} ms"
+
+
+def _print_extras(rows: list[dict], extra_results: list[dict]) -> None:
+    """One line per extra metric and log (its figures, or its error), then its notes."""
+    for row, ex in zip(rows, extra_results):
+        log = row["log"]
+        for metric, res in ex.items():
+            if metric == "hysteresis_file":
+                continue
+            if isinstance(res, str):
+                print(f"{log}: {metric}: error: {res}")
+                continue
+            if metric == "step":
+                s = res.metrics
+                settling = (_ms(row["step_settling_s"]) if s.settled else
+                            f"not settled within {s.settling_band_fraction * 100:g} %")
+                effort = ("n/a" if row["step_peak_effort"] is None else
+                          f"{s.peak_effort:.4g} {res.effort_units} ({res.effort_channel})")
+                print(f"{log}: step: {res.step_size * 1e6:.4g} urad at {res.step_time_s:.3f} s: "
+                      f"rise {_ms(row['step_rise_s'])}, overshoot {s.overshoot_percent:.2f} %, "
+                      f"settling {settling}, steady-state error "
+                      f"{s.steady_state_error * 1e6:.3g} urad, peak effort {effort}")
+            elif metric == "frf":
+                if row["frf_coherent_bins"]:
+                    band = (f"coherence >= {MIN_COHERENCE:g} from "
+                            f"{row['frf_coherent_from_hz']:.3g} to {row['frf_coherent_to_hz']:.3g} "
+                            f"Hz ({row['frf_coherent_bins']} bins)")
+                else:
+                    band = f"no bin with coherence >= {MIN_COHERENCE:g}"
+                cmp_ = ("no model comparison" if row["frf_rms_db"] is None else
+                        f"RMS {row['frf_rms_db']:.2f} dB from the model ({res.model_path}) "
+                        f"over the coherent bins")
+                print(f"{log}: frf: {res.input_channel} -> {res.output_channel}: {band}; {cmp_}")
+            else:
+                tc = ("T_c n/a" if row["hyst_coulomb_in_oz"] is None
+                      else f"T_c {row['hyst_coulomb_in_oz']:.3f} in-oz")
+                slope = row["hyst_turnaround_slope_in_oz_per_rad"]
+                slope = "n/a" if slope is None else f"{slope:.4g} in-oz/rad"
+                table = "slope table identified" if row["hyst_slope_table"] else "no slope table"
+                if row["hyst_slope_table_file"]:
+                    table += f", written to {row['hyst_slope_table_file']}"
+                print(f"{log}: hysteresis: {row['hyst_branches']} branches "
+                      f"({row['hyst_complete_branches']} complete), {tc}, turnaround slope "
+                      f"(median) {slope}, {table}")
+            for note in res.notes:
+                print(f"{log}: {metric}: note: {note}")
 
 
 def _print_table(rows: list[dict], metrics: tuple[str, ...], results) -> None:
     cols = _COMMON + [c for metric in METRICS if metric in metrics for c in _COLUMNS[metric]]
     table = [[h for h, _, _ in cols]]
-    for row in rows:
-        if row["error"]:
+    for row, (_, m, _) in zip(rows, results):
+        if m is None:                                  # the log could not be analysed
             table.append([row["log"]] + ["-"] * (len(cols) - 1))
             continue
         cells = []
