@@ -308,7 +308,7 @@ def test_a_sensor_that_never_moves_is_not_scored_as_perfect(tmp_path):
         log = Path(tb.stop_recording()["files"][0])
     m = analyze_log(log)
     assert m.jitter is None and m.spectrum is None and m.energy is not None
-    assert any("autocollimator reads one constant value" in n and "--sensor encoder_inner" in n
-               for n in m.notes)
+    assert any("autocollimator reads one constant value" in n and "relative set-up" in n
+               and "--sensor encoder_inner" in n for n in m.notes)
     inner = analyze_log(log, sensor="encoder_inner")
     assert inner.jitter is not None and inner.jitter.std_rad > 0

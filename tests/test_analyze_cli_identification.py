@@ -163,3 +163,41 @@ def test_the_cli_channel_choices_are_the_analysis_ones():
     assert cli_analysis.FRF_INPUTS == tuple(li.FRF_INPUTS)
     assert cli_analysis.FRF_OUTPUTS == tuple(li.FRF_OUTPUTS)
     assert cli_analysis.MIN_COHERENCE == li.DEFAULT_MIN_COHERENCE
+
+
+def test_reference_transitions_group_a_shaped_step_and_split_separate_ones():
+    from groundstation.analysis.log_identification import STEP_MERGE_S, _reference_transitions
+
+    rate = 1200.0
+    ref = np.zeros(3 * int(rate))
+    ref[600:] = 1e-3                                          # a raw step: one frame
+    shaped = 0.5 - 0.5 * np.cos(np.pi * np.arange(1, 13) / 12)    # 12 frames, 0 -> 1
+    ref[1800:1812] = 1e-3 - 1e-3 * shaped                     # a shaped step back down
+    ref[1812:] = 0.0
+    assert _reference_transitions(ref, rate) == [(599, 599), (1799, 1810)]
+    # a pause shorter than STEP_MERGE_S inside a move joins the two halves
+    ref2 = np.zeros(2000)
+    ref2[500:] = 1e-4
+    ref2[500 + int(STEP_MERGE_S * rate) // 2:] = 2e-4
+    assert len(_reference_transitions(ref2, rate)) == 1
+    assert _reference_transitions(np.zeros(100), rate) == []
+
+
+def test_a_step_up_then_back_is_scored_until_the_reference_moves_again(tmp_path):
+    """The steady state of the step up is its own, not the level after the step back."""
+    with Testbed("sim", testbed=TESTBED, fast=True, generator=None, log_folder=tmp_path,
+                 history=tmp_path / "h") as tb:
+        tb.upload_design(DESIGN)
+        tb.set_mode("RELATIVE")
+        tb.arm()
+        tb.start_recording("up and back")
+        tb.dwell(0.3)
+        tb.set_reference(STEP_RAD)
+        tb.dwell(1.5)
+        tb.set_reference(0.0)
+        tb.dwell(1.0)
+        log = Path(tb.stop_recording()["files"][0])
+    s = step_from_log(log)
+    assert s.step_size == pytest.approx(STEP_RAD, rel=1e-3)
+    assert any("scored until the reference changes again" in n for n in s.notes)
+    assert abs(s.metrics.steady_state_error) < 0.1 * STEP_RAD

@@ -100,13 +100,14 @@ def test_two_logs_give_two_rows_and_two_curves(qtbot, window, logs):
     panel = window.analysis
     panel.add_log(logs["sysid"])
     panel.add_log(logs["rest"])
+    panel.sensor.setCurrentText("encoder_inner")           # the relative rig has no autocollimator
     panel.window_from.setText("0.2")                       # a window applies to each log
     press(qtbot, panel.metrics_button)
     qtbot.waitUntil(lambda: idle(panel) and panel.metrics_table.rowCount() == 2, timeout=WAIT_MS)
     rows = table_rows(panel)
     assert [r["log"] for r in rows] == [Path(logs["sysid"]).name, Path(logs["rest"]).name]
     for r, path in zip(rows, (logs["sysid"], logs["rest"])):
-        assert r["rms_urad"] == analyze_log(path, start_s=0.2).row()["rms_urad"]
+        assert r["rms_urad"] == analyze_log(path, start_s=0.2, sensor="encoder_inner").row()["rms_urad"]
         assert r["from_s"] == pytest.approx(0.2, abs=1e-9)
     assert set(panel.spectra.psd_curves) == {Path(logs["sysid"]).name, Path(logs["rest"]).name}
     # untick one: one row, one curve
@@ -180,6 +181,7 @@ def test_a_broken_file_is_said_in_the_panel_and_the_window_goes_on(qtbot, window
     panel.window_from.setText("")
     # and the panel still works: the broken log and a good one side by side
     panel.add_log(logs["sysid"])
+    panel.sensor.setCurrentText("encoder_inner")
     press(qtbot, panel.metrics_button)
     qtbot.waitUntil(lambda: idle(panel) and panel.metrics_table.rowCount() == 2, timeout=WAIT_MS)
     assert len(panel.spectra.psd_curves) == 1

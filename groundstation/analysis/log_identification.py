@@ -562,16 +562,33 @@ def hysteresis_from_log(path: str | Path, start_s: float | None = None,
 # ======================================================================================
 # step response
 # ======================================================================================
+#: pauses shorter than this inside a moving reference belong to the same (shaped) step
+STEP_MERGE_S = 0.05
+
+
+def _reference_transitions(ref: np.ndarray, rate_hz: float) -> list[tuple[int, int]]:
+    """(first, last) indices into diff(ref) of each stretch where the reference moves,
+    stretches closer than STEP_MERGE_S joined."""
+    moving = np.flatnonzero(np.isfinite(np.diff(ref)) & (np.diff(ref) != 0.0))
+    if not moving.size:
+        return []
+    breaks = np.flatnonzero(np.diff(moving) > max(1, int(STEP_MERGE_S * rate_hz)))
+    starts = np.concatenate(([moving[0]], moving[breaks + 1]))
+    ends = np.concatenate((moving[breaks], [moving[-1]]))
+    return list(zip(starts.tolist(), ends.tolist()))
+
+
 def step_from_log(path: str | Path, start_s: float | None = None, stop_s: float | None = None,
                   effort_channel: str | None = "current_coarse") -> LogStep:
     """Step-response figures (analysis.step.step_metrics) of a closed-loop record.
 
     The response is ``reference - error_angle``: the controlled angle, whatever the mode
     in the log controls (outer axis, relative angle or LOS).  The step is the largest
-    jump of ``reference`` between consecutive frames within the window [start_s, stop_s]
-    (s from the log's start; None: open end), commanded at the first frame carrying the
-    new value; step_metrics gets that jump as the step size and the frame's time as the
-    start.  The effort is `effort_channel` (None: no effort figure).
+    change of ``reference`` within the window [start_s, stop_s] (s from the log's start;
+    None: open end): a raw step (one frame) or a shaped one (the reference moving over
+    consecutive frames, pauses under STEP_MERGE_S merged), commanded at the first frame
+    carrying a new value; step_metrics gets the net change as the step size and that
+    frame's time as the start.  The effort is `effort_channel` (None: no effort figure).
     Raises NoStepError when no jump exceeds MIN_STEP_RAD, MissingChannelError,
     WindowTooShortError, StepMetricsError (e.g. too few samples after the step), LogError."""
     needed = ["reference", "error_angle"] + ([effort_channel] if effort_channel else [])
@@ -591,23 +608,40 @@ def step_from_log(path: str | Path, start_s: float | None = None, stop_s: float 
     if t.size < 2:
         raise WindowTooShortError(f"{name}: {t.size} frame(s) in the window: a step needs more")
     jumps = np.diff(ref)
-    finite = np.isfinite(jumps)
-    if not np.any(finite):
+    if not np.any(np.isfinite(jumps)):
         raise NoStepError(f"{name}: the reference has no finite samples in the window")
-    k = int(np.nanargmax(np.where(finite, np.abs(jumps), -np.inf)))
-    size = float(jumps[k])
+    transitions = _reference_transitions(ref, rate)
+    if not transitions:
+        raise NoStepError(f"{name}: the reference makes no step in the window {t[0]:.3f}.."
+                          f"{t[-1]:.3f} s (it never changes)")
+    # the transition with the largest net change: a raw step is one frame long, a shaped
+    # (smoothed) step many - timed from its first change either way
+    a, b = max(transitions, key=lambda ab: abs(ref[ab[1] + 1] - ref[ab[0]]))
+    size = float(ref[b + 1] - ref[a])
+    k = a
     if not abs(size) > MIN_STEP_RAD:
         raise NoStepError(f"{name}: the reference makes no step in the window {t[0]:.3f}.."
-                          f"{t[-1]:.3f} s (largest jump between frames {abs(size):.3g} rad, "
-                          f"a step must exceed {MIN_STEP_RAD:g} rad)")
+                          f"{t[-1]:.3f} s (largest change {abs(size):.3g} rad, a step must "
+                          f"exceed {MIN_STEP_RAD:g} rad)")
     _, _, missing = _longest_run(t, rate)
     if missing:
         notes.append(f"{missing} frame(s) missing in the window (not bridged)")
-    others = np.count_nonzero(np.abs(jumps) > max(MIN_STEP_RAD, 0.1 * abs(size)))
+    if b > a:
+        notes.append(f"a shaped step: the reference moves over {(t[b + 1] - t[a + 1]) * 1e3:.1f} ms; "
+                     f"times are from its first change")
+    others = sum(1 for x, y in transitions
+                 if abs(ref[y + 1] - ref[x]) > max(MIN_STEP_RAD, 0.1 * abs(size)))
     if others > 1:
-        notes.append(f"the reference jumps {others} times in the window; the largest "
+        notes.append(f"the reference steps {others} times in the window; the largest "
                      f"({size:.3g} rad at {t[k + 1]:.3f} s) is evaluated")
-    metrics = step_metrics(t, response, size, float(t[k + 1]), effort)
+    # the step's response lasts until the reference moves again (a profile that steps up
+    # and back down): scored to there, so the steady state is this step's
+    later = [x for x, _ in transitions if x > b]
+    end = later[0] + 1 if later else t.size
+    if end < t.size:
+        notes.append(f"scored until the reference changes again at {t[end]:.3f} s")
+    metrics = step_metrics(t[:end], response[:end], size, float(t[k + 1]),
+                           effort[:end] if effort is not None else None)
     return LogStep(path=Path(path), window_from_s=float(t[0]), window_to_s=float(t[-1]),
                    frames=int(t.size), step_time_s=float(t[k + 1]), step_size=size,
                    reference_before=float(ref[k]), effort_channel=effort_channel,

@@ -42,6 +42,8 @@ from .spectra import DEFAULT_SEGMENT_S, Spectrum, WelchAccumulator, segment_samp
 PACKET = "HIGH_RATE"
 SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
 DEFAULT_SENSOR = "autocollimator"           # the reference's scoring sensor
+#: the sensors only the inertial set-up carries (IMU and mirror with the autocollimator)
+LOS_SENSORS = ("autocollimator", "los_estimate")
 METRICS = ("jitter", "energy", "psd")
 DEFAULT_CHUNK_ROWS = 1 << 18                # ~2 MB per float64 column read at once
 CURRENTS = ("current_coarse", "current_fine")
@@ -60,11 +62,12 @@ class TestbedFigures:
     autocollimator_range_rad: float | None
     resistance_coarse_ohm: float | None
     resistance_fine_ohm: float | None
+    setup: str = ""                              # "relative" | "inertial" | '' unknown
 
     @classmethod
     def of(cls, tb: Testbed, source: str) -> "TestbedFigures":
         return cls(source, tb.sensors["autocollimator_range"] * DEG, tb.motor_coarse["resistance"],
-                   tb.motor_fine["resistance"])
+                   tb.motor_fine["resistance"], tb.setup)
 
 
 def _number(doc: dict, section: str, key: str) -> float | None:
@@ -100,7 +103,8 @@ def figures_from_testbed(reader: LogReader, testbed: str | Path | Testbed | None
     rng = _number(doc, "sensors", "autocollimator_range")
     return TestbedFigures(f"{label} (as recorded in the log)", None if rng is None else rng * DEG,
                           _number(doc, "motor_coarse", "resistance"),
-                          _number(doc, "motor_fine", "resistance"))
+                          _number(doc, "motor_fine", "resistance"),
+                          str(doc.get("testbed", {}).get("setup", "")) if isinstance(doc.get("testbed"), dict) else "")
 
 
 # ---------------------------------------------------------------------- missing frames
@@ -344,11 +348,16 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
     # segment) leaves that figure out with the reason; the others still stand
     jitter = spectrum = None
     if jit is not None and jit.n and jit.lowest == jit.highest:
-        # every sample the same value: nothing measured, not a perfect line of sight
-        notes.append(f"no jitter or PSD: the {sensor} reads one constant value "
-                     f"({jit.lowest:.6g} rad) over all {jit.n} samples - is it fitted on this "
-                     f"set-up? (a relative rig has no autocollimator: --sensor encoder_inner)")
-        jit = welch = None
+        if figures.setup == "relative" and sensor in LOS_SENSORS:
+            # the relative set-up has no IMU or mirror: the channel is a placeholder, and
+            # its constant is nothing measured - not a perfect line of sight
+            notes.append(f"no jitter or PSD: the {sensor} reads one constant value "
+                         f"({jit.lowest:.6g} rad) over all {jit.n} samples and the testbed is the "
+                         f"relative set-up, which has no autocollimator or IMU: --sensor encoder_inner")
+            jit = welch = None
+        else:
+            notes.append(f"the {sensor} reads one constant value over all {jit.n} samples: any "
+                         f"motion was below its resolution")
     if jit is not None:
         try:
             jitter = jit.result(sensor, missing_frames=missing, exclusion_rule=rule)
