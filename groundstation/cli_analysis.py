@@ -204,7 +204,8 @@ def _cmd_analyze(args) -> int:
 
 def _extras(name: str, extras: tuple[str, ...], args, testbed) -> dict:
     """{metric: result, or the error message} of the extra metrics of one log."""
-    from .analysis.log_identification import frf_from_log, hysteresis_from_log, step_from_log
+    from .analysis.log_identification import frf_from_log, hysteresis_from_log
+    from .analysis.log_step import step_from_log
     from .errors import GroundStationError
 
     out: dict = {}

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from groundstation import Testbed
-from groundstation.analysis.log_identification import NoStepError, step_from_log
+from groundstation.analysis.log_step import NoStepError, step_from_log
 from groundstation.analysis.step import step_metrics
 from groundstation.cli import main
 from groundstation.logs import LogReader
@@ -166,7 +166,7 @@ def test_the_cli_channel_choices_are_the_analysis_ones():
 
 
 def test_reference_transitions_group_a_shaped_step_and_split_separate_ones():
-    from groundstation.analysis.log_identification import STEP_MERGE_S, _reference_transitions
+    from groundstation.analysis.log_step import STEP_MERGE_S, _reference_transitions
 
     rate = 1200.0
     ref = np.zeros(3 * int(rate))
