@@ -119,11 +119,10 @@ def _cmd_upload(args) -> int:
             # the very table that is sent - the design over the device's active table -
             # is validated again inside the upload
             values = table_values(design, base=station.read_params().values, dictionary=dictionary)
-            for line in report_lines(design, validate(design, values, dictionary)):
-                print(line)
             try:
-                record = station.upload_table(values, str(args.file), design=design,
-                                              progress=print_progress)
+                record = station.upload_table(
+                    values, str(args.file), design=design, progress=print_progress,
+                    on_report=lambda report: print("\n".join(report_lines(design, report))))
             except GroundStationError as exc:
                 if isinstance(exc.__cause__, ValidationRefused):
                     return fail(f"{args.file}: refused, nothing was sent")

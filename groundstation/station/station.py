@@ -338,19 +338,25 @@ class Station:
 
     def upload_table(self, values: Mapping[str, Any], source: str, *, design=None,
                      accept_risk: str | None = None,
-                     progress: Callable[[str, float], None] | None = None):
+                     progress: Callable[[str, float], None] | None = None,
+                     on_report: Callable[[Any], None] | None = None):
         """Upload a complete table, verified.  With `design` it is validated against it;
         without one the closed loop cannot be checked, so it is sent only with
-        `accept_risk` (the override, recorded).  Returns the UploadRecord."""
+        `accept_risk` (the override, recorded).  `on_report` receives the validation's
+        report (passed or refused) before anything is sent.  Returns the UploadRecord."""
         from ..params.clearance import ValidationRefused, clear_design, override_table
 
         self._check_running()
         try:
             if design is not None:
-                clearance, _ = clear_design(design, values, self.d, accept_risk)
+                clearance, report = clear_design(design, values, self.d, accept_risk)
+                if on_report is not None:
+                    on_report(report)
             else:
                 clearance = override_table(values, self.d, accept_risk or "")
         except ValidationRefused as exc:
+            if on_report is not None and exc.report is not None:
+                on_report(exc.report)
             raise ScriptError(f"{source}: {exc}") from exc
         if clearance.overridden:
             self.echo(f"WARNING: uploading {source} although it is not validated "
