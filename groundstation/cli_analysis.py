@@ -1,5 +1,6 @@
 """`groundstation analyze LOG...`: LOS jitter, control energy and spectra of recorded logs,
-and on request a step response, a frequency response and a hysteresis loop of each.
+and on request a step response, a frequency response, a hysteresis loop and the running
+friction against velocity of each.
 
 Argument parsing imports only the standard library; numpy, scipy and h5py come with the
 command (groundstation.analysis), matplotlib only with --plot.
@@ -17,8 +18,9 @@ from pathlib import Path
 # the analysis package's choices, repeated here so that parsing needs no numpy
 # (tests/test_analysis_log.py checks they are the same)
 METRICS = ("jitter", "energy", "psd")
-#: asked for by name only (not in the default): analysis/log_identification.py
-EXTRA_METRICS = ("step", "frf", "hysteresis")
+#: asked for by name only (not in the default): analysis/log_identification.py,
+#: log_step.py, log_friction_velocity.py
+EXTRA_METRICS = ("step", "frf", "hysteresis", "friction_velocity")
 ALL_METRICS = METRICS + EXTRA_METRICS
 FRF_INPUTS = ("current_coarse", "torque_coarse_cmd", "current_fine", "torque_fine_cmd")
 FRF_OUTPUTS = ("encoder_outer", "encoder_inner", "gyro_rate", "autocollimator", "los_estimate")
@@ -37,8 +39,10 @@ bridged.
 Asked for by name: step (response = reference - error_angle, the angle the mode
 controls; the step is the reference's largest jump between frames in the window), frf
 (H1 of --frf-input to --frf-output against the testbed model, compared over the bins with
-coherence >= 0.9) and hysteresis (the friction loop of a triangle test; --slope-table
-writes the identified DB-DHM table).  See docs/analysis.md.
+coherence >= 0.9), hysteresis (the friction loop of a triangle test; --slope-table
+writes the identified DB-DHM table) and friction_velocity (the mean torque across the
+bearing on each constant-velocity pass of a velocity-ramp test, with its velocity).
+See docs/analysis.md.
 exit status: 0 every figure asked for was computed for every log; 1 a log could not
 be analysed, or a figure could not be computed from its data (the lines under the table
 say why); 2 bad arguments."""
@@ -73,6 +77,8 @@ ROW_KEYS = ["log", "path", "test_name", "from_s", "to_s", "frames", "missing_fra
             "frf_coherent_bins", "frf_rms_db",
             "hyst_branches", "hyst_complete_branches", "hyst_coulomb_in_oz",
             "hyst_turnaround_slope_in_oz_per_rad", "hyst_slope_table", "hyst_slope_table_file",
+            "fv_segments", "fv_settled_segments", "fv_speed_deg_s", "fv_torque_pos_in_oz",
+            "fv_torque_neg_in_oz", "fv_friction_in_oz", "fv_offset_in_oz", "fv_torque_formula",
             "notes", "error"]
 
 
@@ -204,6 +210,7 @@ def _cmd_analyze(args) -> int:
 
 def _extras(name: str, extras: tuple[str, ...], args, testbed) -> dict:
     """{metric: result, or the error message} of the extra metrics of one log."""
+    from .analysis.log_friction_velocity import friction_velocity_from_log
     from .analysis.log_identification import frf_from_log, hysteresis_from_log
     from .analysis.log_step import step_from_log
     from .errors import GroundStationError
@@ -217,6 +224,9 @@ def _extras(name: str, extras: tuple[str, ...], args, testbed) -> dict:
                 out[metric] = frf_from_log(name, args.frf_input, args.frf_output, args.start,
                                            args.stop, testbed=testbed,
                                            min_coherence=MIN_COHERENCE)
+            elif metric == "friction_velocity":
+                out[metric] = friction_velocity_from_log(name, args.start, args.stop,
+                                                         testbed=testbed)
             else:
                 out[metric] = hysteresis_from_log(name, args.start, args.stop, testbed=testbed)
         except GroundStationError as exc:
@@ -286,6 +296,8 @@ def _extra_row(ex: dict) -> tuple[dict, list[str], list[str]]:
                        frf_coherent_bins=int(f.size),
                        frf_rms_db=_finite(c.rms_magnitude_ratio_db)
                        if c is not None and c.bins_used else None)
+        elif metric == "friction_velocity":
+            row.update(friction_velocity_figures(res.result), fv_torque_formula=res.torque_formula)
         else:
             ident = res.identification
             slopes = np.array([b.turnaround_slope_in_oz_per_rad for b in res.loop.branches])
@@ -298,6 +310,23 @@ def _extra_row(ex: dict) -> tuple[dict, list[str], list[str]]:
                        hyst_slope_table=ident is not None,
                        hyst_slope_table_file=ex.get("hysteresis_file", ""))
     return row, notes, errors
+
+
+def friction_velocity_figures(fv) -> dict:
+    """The flat figures of a FrictionVelocity: segments, settled ones, their mean speed
+    (deg/s), each direction's mean torque, the friction ((T+ - T-)/2 with both
+    directions settled, else |T| of the one) and the offset ((T+ + T-)/2)."""
+    settled = [s for s in fv.segments if s.settled]
+    pos, neg = fv.mean(+1), fv.mean(-1)
+    friction = fv.running_torque_in_oz
+    if friction is None and (pos or neg):
+        friction = abs((pos or neg)[1])
+    speed = (sum(s.speed_deg_s * s.samples for s in settled) / sum(s.samples for s in settled)
+             if settled else None)
+    return {"fv_segments": len(fv.segments), "fv_settled_segments": len(settled),
+            "fv_speed_deg_s": speed, "fv_torque_pos_in_oz": pos[1] if pos else None,
+            "fv_torque_neg_in_oz": neg[1] if neg else None, "fv_friction_in_oz": friction,
+            "fv_offset_in_oz": fv.offset_in_oz}
 
 
 def _row(name: str, m, error: str, ex: dict) -> dict:
@@ -348,6 +377,21 @@ def _print_extras(rows: list[dict], extra_results: list[dict]) -> None:
                         f"RMS {row['frf_rms_db']:.2f} dB from the model ({res.model_path}) "
                         f"over the coherent bins")
                 print(f"{log}: frf: {res.input_channel} -> {res.output_channel}: {band}; {cmp_}")
+            elif metric == "friction_velocity":
+                for s in res.result.segments:
+                    print(f"{log}: friction_velocity: {'+' if s.direction > 0 else '-'}"
+                          f"{s.speed_deg_s:.4g} deg/s ({s.start_s:.2f}..{s.stop_s:.2f} s): "
+                          f"{res.torque_formula} = {s.torque_in_oz:+.4g} in-oz (std "
+                          f"{s.torque_std_in_oz:.3g}, drift {s.torque_drift_in_oz:+.3g})"
+                          + ("" if s.settled else ", not settled"))
+                f = row["fv_friction_in_oz"]
+                print(f"{log}: friction_velocity: {row['fv_settled_segments']} of "
+                      f"{row['fv_segments']} segment(s) settled; friction "
+                      + ("n/a" if f is None else f"{f:.4g} in-oz")
+                      + ("" if row["fv_offset_in_oz"] is None
+                         else f", offset {row['fv_offset_in_oz']:+.3g} in-oz"))
+                for note in res.result.notes:
+                    print(f"{log}: {metric}: note: {note}")
             else:
                 tc = ("T_c n/a" if row["hyst_coulomb_in_oz"] is None
                       else f"T_c {row['hyst_coulomb_in_oz']:.3f} in-oz")
