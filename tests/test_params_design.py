@@ -456,3 +456,23 @@ def test_a_design_that_commands_no_torque_leaves_the_axis_free(tmp_path, diction
     r = validate(d, dictionary=dictionary)
     assert not r.ok and r.margins.crossover_hz is None and math.isinf(r.margins.gain_margin_db)
     assert "closed loop is unstable" in r.problems[0] and "z = 1 (0 Hz)" in r.problems[0]
+
+
+# ----------------------------------------------------------------- anti-windup of a design
+def test_a_design_runs_its_filters_through_saturation_unless_it_asks_for_conditional_integration(
+        tmp_path, designs, dictionary):
+    """The reference's controller is the designs plus the motors' limits (testbed.md §6):
+    every shipped design leaves anti-windup off; a design file may ask for the device's
+    conditional integration, and a misspelt choice is refused with the words allowed."""
+    for name, design in designs.items():
+        assert design.anti_windup == "none", name
+        assert table_values(design, dictionary=dictionary)["anti_windup"] == 0, name
+    text = (CONTROLLERS / "relative_design2.toml").read_text()
+    frozen = tmp_path / "frozen.toml"
+    frozen.write_text(text.replace("[saturation]", '[saturation]\nanti_windup = "conditional_integration"')
+                      .replace('"../testbeds/', f'"{ROOT}/profiles/testbeds/'))
+    assert table_values(load_design(frozen), dictionary=dictionary)["anti_windup"] == 1
+    frozen.write_text(frozen.read_text().replace('"conditional_integration"', '"freeze"'))
+    with pytest.raises(DesignError, match="saturation.anti_windup must be one of 'none', "
+                                          "'conditional_integration', got 'freeze'"):
+        load_design(frozen)

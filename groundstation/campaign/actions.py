@@ -399,6 +399,29 @@ class Dwell(Action):
 
 
 @register
+class Settle(Action):
+    """Wait until the rig is at rest, in range and unfaulted before a run's clock starts
+    (Station.settle; the criteria in station/start_state.py).  The run fails - with
+    every unmet criterion and its measured value - if that does not happen in
+    max_seconds."""
+
+    name = "settle"
+    optional = {"max_seconds", "hold_s", "max_motion_urad", "max_rate_mrad_s"}
+
+    def check(self, c: StepCheck) -> None:
+        for key in ("max_seconds", "hold_s", "max_motion_urad", "max_rate_mrad_s"):
+            c.number(key, positive=True)
+
+    def run(self, r: StepRun) -> None:
+        from ..station.start_state import StartCriteria
+        a = r.args
+        criteria = StartCriteria(hold_s=float(a.get("hold_s", 1.0)),
+                                 max_motion_rad=float(a.get("max_motion_urad", 50.0)) * 1e-6,
+                                 max_rate_rad_s=float(a.get("max_rate_mrad_s", 1.0)) * 1e-3)
+        r.tb.settle(float(a.get("max_seconds", 30.0)), criteria, progress=r.progress)
+
+
+@register
 class Mark(Action):
     name = "mark"
     required = {"text"}

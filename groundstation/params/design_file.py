@@ -15,6 +15,7 @@ e is the angle error in rad; "inertial": e is the rate error in rad/s) and one t
     [saturation]
     coarse_in_oz = 81.3
     fine_in_oz = 16.1
+    anti_windup = "none"     # optional: "none" (default) or "conditional_integration"
 
     [friction_compensation]
     enabled = false          # model, sigma_in_oz_per_rad, coulomb_torque_in_oz, alpha,
@@ -94,6 +95,11 @@ class ControllerDesign:
     saturation_coarse_in_oz: float
     saturation_fine_in_oz: float
     friction: FrictionCompensation
+    #: the table's anti_windup entry: "none" runs the designed filters on through a
+    #: saturation, as the reference's controller does (testbed.md §6 names the limits and
+    #: nothing else); "conditional_integration" freezes all cascade states while either
+    #: motor saturates (SPEC.md §10, step 7).  docs/fidelity.md has why "none" is the default.
+    anti_windup: str = "none"
     outer_loop_gain_per_s: float | None = None
     prewarp_hz: float | None = None
     c0_equivalent_to: Path | None = None
@@ -110,7 +116,9 @@ class ControllerDesign:
 # loading
 # ======================================================================================
 _DESIGN_KEYS = {"name", "description", "mode", "testbed", "prewarp_hz", "outer_loop_gain_per_s"}
-_SATURATION_KEYS = {"coarse_in_oz", "fine_in_oz"}
+_SATURATION_KEYS = {"coarse_in_oz", "fine_in_oz", "anti_windup"}
+#: design-file word -> the table's anti_windup value
+ANTI_WINDUP = {"none": 0, "conditional_integration": 1}
 _FRICTION_KEYS = {"enabled", "model", "sigma_in_oz_per_rad", "coulomb_torque_in_oz", "alpha",
                   "slope_table"}
 _TF_KEYS = {"gain", "numerator", "denominator"}
@@ -152,6 +160,10 @@ def _load(path: Path, chain: tuple[Path, ...]) -> ControllerDesign:
                          allowed="a torque >= 0 in in-oz")
     sat_fine = _number(sat, "fine_in_oz", where, "saturation", lo=0.0,
                        allowed="a torque >= 0 in in-oz")
+    anti_windup = sat.get("anti_windup", "none")
+    if anti_windup not in ANTI_WINDUP:
+        raise DesignError(f"{where}: saturation.anti_windup must be one of "
+                          f"{', '.join(repr(k) for k in ANTI_WINDUP)}, got {anti_windup!r}")
     friction = _friction(doc, where)
 
     notes: list[str] = []
@@ -204,7 +216,8 @@ def _load(path: Path, chain: tuple[Path, ...]) -> ControllerDesign:
     return ControllerDesign(
         path=path.resolve(), name=name, description=description, mode=mode, testbed=testbed,
         c0=c0, c1=c1, c2=c2, q=q, saturation_coarse_in_oz=sat_coarse,
-        saturation_fine_in_oz=sat_fine, friction=friction, outer_loop_gain_per_s=kp,
+        saturation_fine_in_oz=sat_fine, anti_windup=anti_windup, friction=friction,
+        outer_loop_gain_per_s=kp,
         prewarp_hz=prewarp, c0_equivalent_to=equivalent_to, c0_order=c0.order,
         notes=tuple(notes), text=text)
 
@@ -390,6 +403,7 @@ def table_values(design: ControllerDesign, base: Mapping[str, Any] | None = None
         values["outer_loop_gain"] = design.outer_loop_gain_per_s
     values["saturation_coarse"] = design.saturation_coarse_in_oz
     values["saturation_fine"] = design.saturation_fine_in_oz
+    values["anti_windup"] = ANTI_WINDUP[design.anti_windup]
     values.update(_friction_values(design, shapes["friction_comp_table_x"][0]))
     return values
 

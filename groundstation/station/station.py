@@ -48,6 +48,7 @@ from ..link.client import DeviceClient
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
 from .recording import RecordingSlot
+from .start_state import RigLimits, StartCriteria, StartStateMonitor
 from .tracker import DeviceStateTracker
 
 log = logging.getLogger(__name__)
@@ -426,6 +427,44 @@ class Station:
         # a fault ends the wait at once: the log then ends near the fault, not a minute on
         self.clock.advance(seconds, progress, until=lambda: self.state.fault)
         self._check_running()
+
+    def settle(self, max_seconds: float = 30.0, criteria: StartCriteria | None = None,
+               progress: Callable[[float], None] | None = None) -> dict[str, float]:
+        """Wait (device time) until the rig is at rest, in range and unfaulted for the
+        criteria's hold time (station/start_state.py); the measured start state, also
+        marked in the log.  A latched fault is acknowledged (DISARM) first, as after a
+        failed run.  Raises ScriptError naming every criterion still failed after
+        `max_seconds`, with the measured values: the run must not start.
+
+        It checks and waits; it does not move the rig.  (Bringing the LOS back onto the
+        autocollimator needs a loop that does not use it - a relative-mode table
+        validated for the inertial testbed - which no shipped design is.)"""
+        if self.clock is None:
+            raise ScriptError("settle: the session is not open")
+        if self.state.fault and not self.state.armed:
+            self.client.command("DISARM")
+        criteria = criteria or StartCriteria()
+        monitor = StartStateMonitor(RigLimits.from_testbed(self.testbed), criteria, self.d.control_rate_hz)
+        self.client.subscribe(monitor)
+        try:
+            self.clock.advance(max_seconds, progress, until=lambda: not monitor.problems())
+            problems = monitor.problems()
+        finally:
+            self.client.unsubscribe(monitor)
+        if problems:
+            raise ScriptError(f"settle: the rig is not ready after {max_seconds:g} s: "
+                              + "; ".join(map(str, problems)))
+        state = monitor.summary()
+        words = ", ".join(f"{k} {v:.6g}" for k, v in state.items())
+        self._note(f"start state verified: {words}")
+        return state
+
+    def _note(self, text: str) -> None:
+        """A line for the operator, and a mark in the log when one is recording."""
+        if self.recording.active:
+            self.mark(text)
+        else:
+            self.echo(text)
 
     def pause(self, prompt: str) -> None:
         """Wait for the operator; refused when nobody can answer (a non-interactive run)."""
