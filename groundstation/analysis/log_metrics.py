@@ -27,7 +27,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
@@ -222,8 +222,13 @@ def analyze_log(path: str | Path, *, metrics: Iterable[str] = METRICS, start_s: 
                 stop_s: float | None = None, sensor: str = DEFAULT_SENSOR,
                 integration_period_s: float = DEFAULT_INTEGRATION_PERIOD_S,
                 testbed: str | Path | Testbed | None = None, psd_segment_s: float = DEFAULT_SEGMENT_S,
-                chunk_rows: int = DEFAULT_CHUNK_ROWS) -> LogMetrics:
+                chunk_rows: int = DEFAULT_CHUNK_ROWS,
+                on_progress: Callable[[int, int], None] | None = None) -> LogMetrics:
     """The metrics of the log at `path` over its window (see the module docstring).
+
+    `on_progress(frames_read, frames_in_window)` is called after each chunk; whatever it
+    raises ends the analysis there and reaches the caller (the log closed): a caller's
+    cancel.
 
     Raises a GroundStationError naming what is wrong: the log cannot be read (LogError),
     a channel or testbed constant is missing, the window is empty, or every sample of
@@ -235,11 +240,11 @@ def analyze_log(path: str | Path, *, metrics: Iterable[str] = METRICS, start_s: 
         raise AnalysisError(f"chunk_rows must be >= 1, not {chunk_rows}")
     with LogReader(path) as r:
         return _analyze(r, wanted, start_s, stop_s, sensor, integration_period_s, testbed,
-                        psd_segment_s, int(chunk_rows))
+                        psd_segment_s, int(chunk_rows), on_progress)
 
 
 def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s, testbed,
-             psd_segment_s, chunk_rows) -> LogMetrics:
+             psd_segment_s, chunk_rows, on_progress=None) -> LogMetrics:
     chans = {c.name: c for c in r.channels(PACKET)}
     rate = r.tick_rate_hz
     figures = figures_from_testbed(r, testbed)
@@ -336,6 +341,8 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
         if energy is not None:
             energy.feed(d[CURRENTS[0]], d[CURRENTS[1]],
                         d[sat_bits[0]] if sat_bits else None, d[sat_bits[1]] if sat_bits else None)
+        if on_progress is not None:
+            on_progress(frames, i1 - i0)
     # the window's ends in device time: two values, not a column
     ends = r.read_rows(PACKET, ["device_time"], i0, i0 + 1, with_time=False)["device_time"]
     first_t = float(ends[0])
