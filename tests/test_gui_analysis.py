@@ -55,7 +55,7 @@ def press(qtbot, button) -> None:
 
 def idle(panel) -> bool:
     return panel.jobs.idle() and all(b.isEnabled() for b in (
-        panel.metrics_button, panel.frf_button, panel.hysteresis_button))
+        panel.metrics_button, panel.frf_button, panel.hysteresis_button, panel.step_button))
 
 
 def table_rows(panel) -> list[dict]:
@@ -120,23 +120,27 @@ def test_two_logs_give_two_rows_and_two_curves(qtbot, window, logs):
 def test_frf_draws_measured_model_and_coherence(qtbot, window, logs):
     panel = window.analysis
     panel.add_log(logs["rest"])
-    panel.add_log(logs["sysid"])                           # highlighted: FRF acts on it
+    panel.add_log(logs["sysid"])
     panel.segments.setCurrentText("512")
-    press(qtbot, panel.frf_button)
-    qtbot.waitUntil(lambda: idle(panel) and "coherence" in panel.frf_plots.items, timeout=WAIT_MS)
-    items = panel.frf_plots.items
-    assert set(items) == {"measured_magnitude", "model_magnitude", "measured_phase",
-                          "model_phase", "coherence"}
-    for item in items.values():
+    press(qtbot, panel.frf_button)                         # both ticked: rest has no excitation
+    qtbot.waitUntil(lambda: idle(panel) and bool(panel.frf_plots.curves), timeout=WAIT_MS)
+    name = Path(logs["sysid"]).name
+    assert list(panel.frf_plots.curves) == [name]
+    assert "FRF of 1 of 2 log(s)" in panel.status.text()
+    assert f"{Path(logs['rest']).name}: current_coarse is constant" in panel.status.text()
+    curves, model = panel.frf_plots.curves[name], panel.frf_plots.model
+    assert set(curves) == {"magnitude", "phase", "coherence"} and set(model) == {"magnitude", "phase"}
+    for item in [*curves.values(), *model.values()]:
         x, y = item.getData()
         assert len(x) > 50 and np.all(np.isfinite(y))
     expected = frf_from_log(logs["sysid"], nperseg=512)
     f, coh = expected.measured.freq_hz, expected.measured.coherence
     ok = (f > 0) & np.isfinite(coh)
-    _, drawn = items["coherence"].getData()
+    _, drawn = curves["coherence"].getData()
     np.testing.assert_array_equal(drawn, coh[ok])
     assert np.median(coh[(f >= 10) & (f <= 300)]) > 0.95   # the excited band
-    assert items["model_magnitude"].name() == "model T1->phi1"
+    assert model["magnitude"].name() == "model T1->phi1"
+    assert curves["magnitude"].name() == name
     assert "x K_t 32.1 in-oz/A" in panel.frf_plots.caption.text()
     assert panel.tabs.currentWidget() is panel.frf_plots
 
@@ -148,8 +152,9 @@ def test_hysteresis_draws_a_loop_and_says_why_not(qtbot, window, logs):
     qtbot.waitUntil(lambda: idle(panel) and panel.hysteresis_plot.branches_drawn > 0,
                     timeout=WAIT_MS)
     assert "branches" in panel.status.text()
-    assert {"lead-in", "angle rising", "angle falling"} <= set(panel.hysteresis_plot.curves)
-    x, y = panel.hysteresis_plot.curves["angle rising"].getData()
+    curves = panel.hysteresis_plot.curves[Path(logs["sysid"]).name]
+    assert {"lead-in", "angle rising", "angle falling"} <= set(curves)
+    x, y = curves["angle rising"].getData()
     assert len(x) > 100 and np.isfinite(y).any()
     # the rest before the profile: no current, no loop - said in the panel
     panel.window_to.setText("0.3")

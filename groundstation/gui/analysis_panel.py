@@ -2,53 +2,47 @@
 
 Left, the logs it acts on (analysis_runs.RunsTable): the log the window replays (added
 when the Session opens it), files chosen with File…, the logs of a folder (a campaign's)
-with Folder….  Then the options - the scored sensor, the integration period, a window
-of the log (from/to in seconds from its start; empty: the whole log), the FRF's input
-and output channels, segment length and testbed - and the three buttons:
+with Folder….  Then the options (analysis_controls.OptionsBox) - the scored sensor, the
+integration period, a window of the log (from/to in seconds from its start; empty: the
+whole log), the FRF's input and output channels, segment length and testbed - and the
+buttons (ActionsBox).  Each acts on every ticked log (when none is ticked, on the
+highlighted one), one colour per log in every plot:
 
-* Metrics: jitter and energy of every ticked log (a table row each) and the PSD and CSP
-  of the scored sensor (a curve each);
-* FRF: the frequency response of the highlighted log, measured against the testbed
-  model, and the coherence;
-* Hysteresis: the friction torque against the outer encoder of the highlighted log.
+* Metrics: jitter and energy (a table row each) and the PSD and CSP of the scored sensor;
+* FRF: the frequency responses overlaid, the testbed model once, and the coherences;
+* Hysteresis: the friction torque against the outer encoder, the loops overlaid;
+* Step: response and reference against the time from the step, and a table of rise,
+  overshoot, settling, steady-state error and peak effort.
+
+Cancel stops the jobs under way (what they computed is dropped); the status line says
+how far a job is (logs done / in all).  Export writes the metrics or step table as CSV
+or JSON (analysis_export.write_rows: the values the table holds) and the plots of the
+tab shown as one PNG.
 
 The widget does no I/O and no computing: AnalysisJobs (analysis_jobs.py) runs the
-analysis modules on worker threads and answers with signals; what fails is said in the
-status line under the buttons, in the error's own words.
+analysis modules on worker threads and answers with signals; analysis_export writes the
+files; what fails is said in the status line in the error's own words.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 
-from PySide6.QtCore import Qt
-from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDoubleSpinBox, QFileDialog,
-                               QFormLayout, QGroupBox, QHBoxLayout, QHeaderView, QLabel,
-                               QLineEdit, QPushButton, QTableWidget, QTableWidgetItem,
-                               QTabWidget, QVBoxLayout, QWidget)
+from PySide6.QtWidgets import (QFileDialog, QGroupBox, QHBoxLayout, QPushButton, QTabWidget,
+                               QVBoxLayout, QWidget)
 
-from ..analysis.jitter import DEFAULT_INTEGRATION_PERIOD_S
-from ..analysis.log_identification import FRF_INPUTS, FRF_OUTPUTS
-from ..analysis.log_metrics import DEFAULT_SENSOR, SENSORS
-from ..plant.testbed import TESTBEDS_DIR
-from .analysis_jobs import AnalysisJobs, MetricsBatch
-from .analysis_plots import FrfPlots, HysteresisPlot, SpectraPlots
+from .analysis_controls import BAD_STYLE, BUSY_STYLE, ActionsBox, OptionsBox
+from ..errors import GroundStationError
+from .analysis_export import write_bytes, write_rows
+from .analysis_jobs import BATCH_JOBS, AnalysisJobs, Batch
+from .analysis_plots import FrfPlots, HysteresisPlot, SpectraPlots, StepPlots, render_png
 from .analysis_runs import RunsTable
+from .analysis_tables import METRIC_COLUMNS, VALUE_ROLE, ResultTable
 from .dock_layout import controls_beside_plots
 
-#: the metrics table: header, LogMetrics.row() key, format ('' : text as it is)
-METRIC_COLUMNS = (("log", "log", ""), ("sensor", "sensor", ""), ("from s", "from_s", ".3f"),
-                  ("to s", "to_s", ".3f"), ("RMS µrad", "rms_urad", ".4g"),
-                  ("std µrad", "std_urad", ".4g"), ("high-pass µrad", "highpass_rms_urad", ".4g"),
-                  ("smear µrad", "smear_rms_urad", ".4g"), ("energy J", "energy_total_j", ".4g"),
-                  ("sat. coarse %", "saturated_coarse_pct", ".3g"),
-                  ("sat. fine %", "saturated_fine_pct", ".3g"), ("note", "notes", ""))
-VALUE_ROLE = Qt.ItemDataRole.UserRole
-SEGMENTS = (256, 512, 1024, 2048, 4096, 8192)
-BAD_STYLE = "color:#c62828;"
-BUSY_STYLE = "color:#1565c0;"
-TABS = ("Metrics", "PSD / CSP", "FRF", "Hysteresis")
+TABS = ("Metrics", "PSD / CSP", "FRF", "Hysteresis", "Step")
+LABELS = {"metrics": "Metrics", "frf": "FRF", "hysteresis": "Hysteresis", "step": "Step",
+          "folder": "Folder"}
 
 
 class AnalysisPanel(QWidget):
@@ -63,8 +57,10 @@ class AnalysisPanel(QWidget):
         j.sig_metrics_done.connect(self._on_metrics)
         j.sig_frf_done.connect(self._on_frf)
         j.sig_hysteresis_done.connect(self._on_hysteresis)
+        j.sig_step_done.connect(self._on_step)
         j.sig_logs_found.connect(self._on_logs_found)
         j.sig_failed.connect(self._on_failed)
+        j.sig_cancelled.connect(self._on_cancelled)
         session.sig_source.connect(self._on_source)
         replay = getattr(session, "replay", None)
         if replay is not None:
@@ -87,87 +83,31 @@ class AnalysisPanel(QWidget):
             row.addWidget(b)
         col.addLayout(row)
 
-        opts = QGroupBox("Options")
-        form = QFormLayout(opts)
-        form.setContentsMargins(6, 4, 6, 4)
-        form.setVerticalSpacing(2)
-        self.sensor = QComboBox()
-        self.sensor.addItems(list(SENSORS))
-        self.sensor.setCurrentText(DEFAULT_SENSOR)
-        self.period = QDoubleSpinBox()
-        self.period.setRange(0.001, 3600.0)
-        self.period.setDecimals(3)
-        self.period.setValue(DEFAULT_INTEGRATION_PERIOD_S)
-        self.period.setSuffix(" s")
-        self.period.setToolTip("integration period of the jitter's high-pass and windowed smear")
-        window = QHBoxLayout()
-        self.window_from = QLineEdit()
-        self.window_from.setPlaceholderText("start")
-        self.window_to = QLineEdit()
-        self.window_to.setPlaceholderText("end")
-        for w in (self.window_from, self.window_to):
-            w.setToolTip("seconds from the log's start (empty: open end)")
-            w.setMaximumWidth(70)
-            window.addWidget(w)
-        self.frf_input = QComboBox()
-        self.frf_input.addItems(list(FRF_INPUTS))
-        self.frf_output = QComboBox()
-        self.frf_output.addItems(list(FRF_OUTPUTS))
-        self.segments = QComboBox()
-        self.segments.addItem("auto", None)
-        for n in SEGMENTS:
-            self.segments.addItem(str(n), n)
-        self.segments.setToolTip("Welch segment length in samples (resolution = rate / length)")
-        self.testbed = QComboBox()
-        self.testbed.addItem("the log's", None)
-        for path in sorted(TESTBEDS_DIR.glob("*.toml")):
-            self.testbed.addItem(path.stem, str(path))
-        self.testbed.setToolTip("the testbed whose model and constants are used (default: the "
-                                "file the log recorded)")
-        form.addRow("sensor", self.sensor)
-        form.addRow("integration", self.period)
-        form.addRow("window s", window)
-        form.addRow("FRF input", self.frf_input)
-        form.addRow("FRF output", self.frf_output)
-        form.addRow("segments", self.segments)
-        form.addRow("testbed", self.testbed)
-
-        actions = QWidget()
-        acol = QVBoxLayout(actions)
-        acol.setContentsMargins(0, 0, 0, 0)
-        self.metrics_button = QPushButton("Metrics")
-        self.metrics_button.setToolTip("jitter, energy and spectra of every ticked log")
-        self.frf_button = QPushButton("FRF")
-        self.frf_button.setToolTip("frequency response of the highlighted log against the model")
-        self.hysteresis_button = QPushButton("Hysteresis")
-        self.hysteresis_button.setToolTip("friction torque against angle of the highlighted log")
-        for b in (self.metrics_button, self.frf_button, self.hysteresis_button):
-            acol.addWidget(b)
-        self.status = QLabel("tick logs, then Metrics; highlight one for FRF or Hysteresis")
-        self.status.setWordWrap(True)
-        self.status.setTextFormat(Qt.TextFormat.PlainText)
-        self.status.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-        self.status.setMinimumWidth(160)
-        acol.addWidget(self.status, 1)
+        self.options = o = OptionsBox()
+        # the options and buttons under the names the panel has always had
+        self.sensor, self.period = o.sensor, o.period
+        self.window_from, self.window_to = o.window_from, o.window_to
+        self.frf_input, self.frf_output = o.frf_input, o.frf_output
+        self.segments, self.testbed = o.segments, o.testbed
+        self.actions = a = ActionsBox()
+        self.metrics_button, self.frf_button = a.metrics_button, a.frf_button
+        self.hysteresis_button, self.step_button = a.hysteresis_button, a.step_button
+        self.cancel_button, self.export_button = a.cancel_button, a.export_button
+        self.status = a.status
 
         self.tabs = QTabWidget()
-        self.metrics_table = QTableWidget(0, len(METRIC_COLUMNS))
-        self.metrics_table.setHorizontalHeaderLabels([c[0] for c in METRIC_COLUMNS])
-        self.metrics_table.verticalHeader().setVisible(False)
-        self.metrics_table.verticalHeader().setDefaultSectionSize(20)
-        self.metrics_table.setEditTriggers(QAbstractItemView.EditTrigger.NoEditTriggers)
-        self.metrics_table.horizontalHeader().setSectionResizeMode(
-            QHeaderView.ResizeMode.ResizeToContents)
+        self.metrics_table = ResultTable(METRIC_COLUMNS)
         self.spectra = SpectraPlots()
         self.frf_plots = FrfPlots()
         self.hysteresis_plot = HysteresisPlot()
+        self.step_plots = StepPlots()
         for name, w in zip(TABS, (self.metrics_table, self.spectra, self.frf_plots,
-                                  self.hysteresis_plot)):
+                                  self.hysteresis_plot, self.step_plots)):
             self.tabs.addTab(w, name)
 
         lay = QVBoxLayout(self)
         lay.setContentsMargins(4, 2, 4, 2)
-        lay.addWidget(controls_beside_plots([runs_box, opts, actions], self.tabs, min_width=240,
+        lay.addWidget(controls_beside_plots([runs_box, o, a], self.tabs, min_width=240,
                                             plots_width=700, pad=20))
 
         self.file_button.clicked.connect(self.files_dialog)
@@ -176,6 +116,13 @@ class AnalysisPanel(QWidget):
         self.metrics_button.clicked.connect(self.run_metrics)
         self.frf_button.clicked.connect(self.run_frf)
         self.hysteresis_button.clicked.connect(self.run_hysteresis)
+        self.step_button.clicked.connect(self.run_step)
+        self.cancel_button.clicked.connect(self.cancel)
+        a.export_metrics_csv.triggered.connect(lambda: self.export_table_dialog("metrics", "csv"))
+        a.export_metrics_json.triggered.connect(lambda: self.export_table_dialog("metrics", "json"))
+        a.export_step_csv.triggered.connect(lambda: self.export_table_dialog("step", "csv"))
+        a.export_step_json.triggered.connect(lambda: self.export_table_dialog("step", "json"))
+        a.export_png.triggered.connect(self.export_plots_dialog)
 
     # ------------------------------------------------------------------ logs
     def add_log(self, path: str | Path, origin: str = "file") -> None:
@@ -209,156 +156,204 @@ class AnalysisPanel(QWidget):
         self._say(f"{len(paths)} log(s) in {folder}" if paths else f"no logs (*.h5) in {folder}",
                   "" if paths else BAD_STYLE)
 
-    # ------------------------------------------------------------------ options
-    def _window(self) -> tuple[float | None, float | None] | None:
-        out = []
-        for name, edit in (("from", self.window_from), ("to", self.window_to)):
-            text = edit.text().strip()
-            if not text:
-                out.append(None)
-                continue
-            try:
-                value = float(text)
-            except ValueError:
-                value = math.nan
-            if not math.isfinite(value):
-                self._say(f"window {name}: {text!r} is not a number of seconds", BAD_STYLE)
-                return None
-            out.append(value)
-        return out[0], out[1]
-
-    def _testbed(self) -> str | None:
-        return self.testbed.currentData()
-
     # ------------------------------------------------------------------ the jobs
-    def run_metrics(self) -> bool:
+    def _window(self):
+        try:
+            return self.options.window()
+        except ValueError as exc:
+            self._say(str(exc), BAD_STYLE)
+            return None
+
+    def _targets(self, job: str) -> list[Path]:
+        """The ticked logs; when none is ticked, the highlighted one (Metrics: ticked only)."""
         paths = self.runs.checked_paths()
+        if not paths and job != "metrics" and self.runs.currentRow() >= 0:
+            paths = [self.runs.current_path()]
         if not paths:
-            self._say("Metrics: tick at least one log", BAD_STYLE)
-            return False
-        window = self._window()
+            self._say(f"{LABELS[job]}: tick at least one log", BAD_STYLE)
+        return paths
+
+    def _run(self, job: str, start) -> bool:
+        paths = self._targets(job)
+        window = self._window() if paths else None
         if window is None:
             return False
-        options = dict(sensor=self.sensor.currentText(), integration_period_s=self.period.value(),
-                       start_s=window[0], stop_s=window[1])
-        if self._testbed():
-            options["testbed"] = self._testbed()
-        return self._started("metrics", self.metrics_button, self.jobs.metrics(paths, **options))
-
-    def run_frf(self) -> bool:
-        path, window = self._one("FRF")
-        if path is None:
-            return False
-        options = dict(input_channel=self.frf_input.currentText(),
-                       output_channel=self.frf_output.currentText(), start_s=window[0],
-                       stop_s=window[1], nperseg=self.segments.currentData(),
-                       testbed=self._testbed())
-        return self._started("frf", self.frf_button, self.jobs.frf(path, **options))
-
-    def run_hysteresis(self) -> bool:
-        path, window = self._one("Hysteresis")
-        if path is None:
-            return False
-        return self._started("hysteresis", self.hysteresis_button, self.jobs.hysteresis(
-            path, start_s=window[0], stop_s=window[1], testbed=self._testbed()))
-
-    def _one(self, what: str):
-        path = self.runs.current_path()
-        if path is None:
-            self._say(f"{what}: highlight a log in the list (or add one)", BAD_STYLE)
-            return None, None
-        window = self._window()
-        return (path, window) if window is not None else (None, None)
-
-    def _started(self, job: str, button: QPushButton, started: bool) -> bool:
+        started = start(paths, window, self.options.testbed_file())
         if started:
-            button.setEnabled(False)
-            self._say(f"{_label(job)}: working…", BUSY_STYLE)
+            self.actions.job_buttons()[job].setEnabled(False)
+            self._say(f"{LABELS[job]}: 0/{len(paths)} logs done…", BUSY_STYLE)
         else:
-            self._say(f"{_label(job)}: still working on the last one", BAD_STYLE)
+            self._say(f"{LABELS[job]}: still working on the last one", BAD_STYLE)
+        self._update_cancel()
         return started
 
-    def _button(self, job: str) -> QPushButton | None:
-        return {"metrics": self.metrics_button, "frf": self.frf_button,
-                "hysteresis": self.hysteresis_button}.get(job)
+    def run_metrics(self) -> bool:
+        def start(paths, window, testbed):
+            options = dict(sensor=self.sensor.currentText(),
+                           integration_period_s=self.period.value(), start_s=window[0],
+                           stop_s=window[1])
+            if testbed:
+                options["testbed"] = testbed
+            return self.jobs.metrics(paths, **options)
+        return self._run("metrics", start)
 
-    # ------------------------------------------------------------------ results
-    def _on_progress(self, job: str, text: str) -> None:
-        self._say(f"{_label(job)}: {text}…", BUSY_STYLE)
+    def run_frf(self) -> bool:
+        return self._run("frf", lambda paths, window, testbed: self.jobs.frf(
+            paths, input_channel=self.frf_input.currentText(),
+            output_channel=self.frf_output.currentText(), start_s=window[0], stop_s=window[1],
+            nperseg=self.segments.currentData(), testbed=testbed))
 
-    def _on_failed(self, job: str, message: str) -> None:
-        button = self._button(job)
+    def run_hysteresis(self) -> bool:
+        return self._run("hysteresis", lambda paths, window, testbed: self.jobs.hysteresis(
+            paths, start_s=window[0], stop_s=window[1], testbed=testbed))
+
+    def run_step(self) -> bool:
+        return self._run("step", lambda paths, window, testbed: self.jobs.step(
+            paths, start_s=window[0], stop_s=window[1]))
+
+    def cancel(self) -> bool:
+        """Stop every analysis under way (metrics, FRF, hysteresis, step)."""
+        return bool([job for job in BATCH_JOBS if self.jobs.cancel(job)])
+
+    def _update_cancel(self) -> None:
+        self.cancel_button.setEnabled(any(self.jobs.busy(job) for job in BATCH_JOBS))
+
+    def _job_ended(self, job: str) -> None:
+        button = self.actions.job_buttons().get(job)
         if button is not None:
             button.setEnabled(True)
-        self._say(f"{_label(job)} failed: {message}", BAD_STYLE)
+        self._update_cancel()
 
-    def _on_metrics(self, batch: MetricsBatch) -> None:
-        self.metrics_button.setEnabled(True)
-        table = self.metrics_table
-        table.setRowCount(0)
-        for m in batch.results:
-            self._metrics_row(m.row())
-        for path, reason in batch.failures:
-            self._metrics_row({"log": path.name, "notes": reason}, bad=True)
-        self.spectra.show_metrics(batch.results)
-        self.tabs.setCurrentIndex(TABS.index("PSD / CSP" if batch.results else "Metrics"))
+    # ------------------------------------------------------------------ results
+    def _on_progress(self, job: str, done: int, total: int, text: str) -> None:
+        self._say(f"{LABELS.get(job, job)}: {done}/{total} logs done - {text}…", BUSY_STYLE)
+
+    def _on_failed(self, job: str, message: str) -> None:
+        self._job_ended(job)
+        self._say(f"{LABELS.get(job, job)} failed: {message}", BAD_STYLE)
+
+    def _on_cancelled(self, job: str) -> None:
+        self._job_ended(job)
+        self._say(f"{LABELS.get(job, job)} cancelled: nothing shown from it", "")
+
+    def _done(self, job: str, batch: Batch, tab: str) -> None:
+        """The status line and the tab shown after a batch: the failures said, the tab
+        of the figures shown when there are any."""
+        self._job_ended(job)
+        n, asked = len(batch.results), len(batch.requested)
+        if batch.results:
+            self.tabs.setCurrentIndex(TABS.index(tab))
         if batch.failures:
-            self.tabs.setCurrentIndex(TABS.index("Metrics"))
-            self._say(f"Metrics of {len(batch.results)} of {len(batch.requested)} log(s); "
-                      + "; ".join(f"{p.name}: {r}" for p, r in batch.failures), BAD_STYLE)
+            why = "; ".join(_failure(p, r) for p, r in batch.failures)
+            self._say(f"{LABELS[job]} of {n} of {asked} log(s); {why}" if n else
+                      f"{LABELS[job]} failed: {why}", BAD_STYLE)
         else:
-            self._say(f"Metrics of {len(batch.results)} log(s)", "")
+            self._say(f"{LABELS[job]} of {n} log(s)", "")
 
-    def _metrics_row(self, values: dict, bad: bool = False) -> None:
+    def _on_metrics(self, batch: Batch) -> None:
         table = self.metrics_table
-        row = table.rowCount()
-        table.insertRow(row)
-        for col, (_, key, fmt) in enumerate(METRIC_COLUMNS):
-            value = values.get(key)
-            if value is None or value == "":
-                text = ""
-            elif fmt and isinstance(value, (int, float)):
-                text = format(value, fmt)
-            else:
-                text = str(value)
-            item = QTableWidgetItem(text)
-            item.setData(VALUE_ROLE, value)
-            if fmt:
-                item.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
-            if key == "notes" and text:
-                item.setToolTip(text)
-                if bad:
-                    item.setForeground(Qt.GlobalColor.red)
-            table.setItem(row, col, item)
+        table.clear_rows()
+        for m in batch.results:
+            table.add_row(m.row())
+        for path, reason in batch.failures:
+            table.add_row({"log": path.name, "notes": reason}, bad=True)
+        self.spectra.show_metrics(batch.results, batch.indices())
+        self._done("metrics", batch, "PSD / CSP")
+        if batch.failures or not batch.results:
+            self.tabs.setCurrentIndex(TABS.index("Metrics"))
 
-    def _on_frf(self, res) -> None:
-        self.frf_button.setEnabled(True)
-        self.frf_plots.show_frf(res)
-        self.tabs.setCurrentIndex(TABS.index("FRF"))
-        self._say(f"FRF of {res.path.name}: {res.input_channel} → {res.output_channel}, "
-                  f"{res.measured.segments} segments"
-                  + ("" if res.model is not None else " (no model: see the notes)"), "")
+    def _on_frf(self, batch: Batch) -> None:
+        if batch.results:
+            self.frf_plots.show_frfs(batch.results, batch.indices())
+        self._done("frf", batch, "FRF")
+        if len(batch.results) == 1 and not batch.failures:
+            res = batch.results[0]
+            self._say(f"FRF of {res.path.name}: {res.input_channel} → {res.output_channel}, "
+                      f"{res.measured.segments} segments"
+                      + ("" if res.model is not None else " (no model: see the notes)"), "")
 
-    def _on_hysteresis(self, res) -> None:
-        self.hysteresis_button.setEnabled(True)
-        self.hysteresis_plot.show_loop(res)
-        self.tabs.setCurrentIndex(TABS.index("Hysteresis"))
-        self._say(f"Hysteresis of {res.path.name}: {len(res.loop.branches)} branches"
-                  + ("" if res.identification is None else
-                     f", T_c {res.identification.coulomb_torque_in_oz:.3f} in-oz"), "")
+    def _on_hysteresis(self, batch: Batch) -> None:
+        if batch.results:
+            self.hysteresis_plot.show_loops(batch.results, batch.indices())
+        self._done("hysteresis", batch, "Hysteresis")
+        if batch.results and not batch.failures:
+            self._say(f"Hysteresis of {len(batch.results)} log(s): "
+                      + ", ".join(_loop_summary(r) for r in batch.results), "")
+
+    def _on_step(self, batch: Batch) -> None:
+        self.step_plots.show_steps(batch.results, batch.indices(), batch.failures)
+        self._done("step", batch, "Step")
+        if batch.failures:
+            self.tabs.setCurrentIndex(TABS.index("Step"))
 
     def _say(self, text: str, style: str = "") -> None:
-        self.status.setStyleSheet(style)
-        self.status.setText(text)
+        self.actions.say(text, style)
+
+    # ------------------------------------------------------------------ export
+    def _table(self, which: str):
+        return {"metrics": self.metrics_table, "step": self.step_plots.table}[which]
+
+    def export_table(self, which: str, path: str | Path, fmt: str | None = None) -> bool:
+        """The metrics or step table (`which`) to `path` as CSV or JSON (`fmt`, None:
+        from the suffix): the values the table holds, one record per row."""
+        table = self._table(which)
+        if not table.count():
+            self._say(f"Export: the {which} table is empty (run {LABELS[which]} first)", BAD_STYLE)
+            return False
+        try:
+            written = write_rows(path, table.keys, table.rows(), fmt)
+        except GroundStationError as exc:
+            self._say(f"Export failed: {exc}", BAD_STYLE)
+            return False
+        self._say(f"{table.count()} record(s) of the {which} table written to {written}", "")
+        return True
+
+    def export_plots(self, path: str | Path) -> bool:
+        """The plots of the tab shown, side by side, to `path` as a PNG."""
+        widget = self.tabs.currentWidget()
+        plots = widget.plot_widgets() if hasattr(widget, "plot_widgets") else []
+        if not plots:
+            self._say(f"Export: the {TABS[self.tabs.currentIndex()]} tab has no plots; show "
+                      f"a plot tab ({', '.join(TABS[1:])})", BAD_STYLE)
+            return False
+        try:
+            written = write_bytes(path, render_png(plots))
+        except GroundStationError as exc:
+            self._say(f"Export failed: {exc}", BAD_STYLE)
+            return False
+        self._say(f"{TABS[self.tabs.currentIndex()]} plots written to {written}", "")
+        return True
+
+    def export_table_dialog(self, which: str, fmt: str) -> None:
+        path, _ = QFileDialog.getSaveFileName(self, f"Write the {which} table", f"{which}.{fmt}",
+                                              f"{fmt.upper()} (*.{fmt})")
+        if path:
+            if not Path(path).suffix:
+                path += f".{fmt}"
+            self.export_table(which, path, fmt)
+
+    def export_plots_dialog(self) -> None:
+        name = TABS[self.tabs.currentIndex()].lower().replace(" / ", "_")
+        path, _ = QFileDialog.getSaveFileName(self, "Write the plots shown", f"{name}.png",
+                                              "PNG (*.png)")
+        if path:
+            self.export_plots(path if Path(path).suffix else path + ".png")
 
     # ------------------------------------------------------------------ closing
     def shutdown(self) -> None:
         self.jobs.shutdown()
 
 
-def _label(job: str) -> str:
-    return {"metrics": "Metrics", "frf": "FRF", "hysteresis": "Hysteresis",
-            "folder": "Folder"}.get(job, job)
+def _failure(path: Path, reason: str) -> str:
+    """A log's failure, named once (most messages start with the log's name already)."""
+    return reason if path.name in reason else f"{path.name}: {reason}"
 
 
-__all__ = ["AnalysisPanel", "METRIC_COLUMNS"]
+def _loop_summary(res) -> str:
+    text = f"{len(res.loop.branches)} branches"
+    if res.identification is not None:
+        text += f", T_c {res.identification.coulomb_torque_in_oz:.3f} in-oz"
+    return text
+
+
+__all__ = ["AnalysisPanel", "METRIC_COLUMNS", "TABS", "VALUE_ROLE"]

@@ -1,7 +1,8 @@
-"""The Analysis dock's plots (pyqtgraph): spectra of several logs, a frequency response
-against the model, a hysteresis loop.  They draw results the analysis modules computed;
-the only arithmetic here is for display (units, dropping the 0 Hz bin a log axis cannot
-show, lining the measured phase up with the model's by whole turns).
+"""The Analysis dock's plots (pyqtgraph): spectra, frequency responses against the model,
+hysteresis loops and step responses, one curve (one colour) per log.  They draw results
+the analysis modules computed; the only arithmetic here is for display (units, dropping
+the 0 Hz bin a log axis cannot show, lining the measured phase up with the model's by
+whole turns).  `render_png` makes one image of a tab's plots for an export.
 """
 
 from __future__ import annotations
@@ -10,16 +11,31 @@ import html
 
 import numpy as np
 import pyqtgraph as pg
+import pyqtgraph.exporters as pg_exporters
+from PySide6.QtCore import QBuffer, QByteArray, QIODevice, Qt
+from PySide6.QtGui import QColor, QImage, QPainter
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
+from .analysis_tables import STEP_COLUMNS, FiguresTable, step_row
+
 URAD = 1e6
-MODEL_PEN = pg.mkPen("#c62828", width=2, style=pg.QtCore.Qt.PenStyle.DashLine)
-MEASURED_PEN = pg.mkPen("#1565c0", width=1.5)
+MODEL_PEN = pg.mkPen("#212121", width=2, style=Qt.PenStyle.DashLine)
+LEAD_IN_PEN = pg.mkPen("#bdbdbd", width=1)
+#: the logs' colours, in turn (matplotlib's "tab10": ten that tell apart on white)
+LOG_COLOURS = ("#1f77b4", "#ff7f0e", "#2ca02c", "#d62728", "#9467bd", "#8c564b", "#e377c2",
+               "#7f7f7f", "#bcbd22", "#17becf")
 
 
-def log_colour(index: int):
-    """The pen of the index-th log: distinct hues, the same log the same colour in every plot."""
-    return pg.mkPen(pg.intColor(index, hues=8, values=1, maxValue=200), width=1.5)
+def log_colour(index: int, style=Qt.PenStyle.SolidLine):
+    """The pen of the index-th log: the same log the same colour in every plot."""
+    return pg.mkPen(LOG_COLOURS[index % len(LOG_COLOURS)], width=1.5, style=style)
+
+
+def _legend(plot: pg.PlotWidget, offset) -> None:
+    """A small legend in black on a pale ground (it may sit over a curve; log names are
+    long and the plots narrow)."""
+    plot.addLegend(offset=offset, labelTextColor="k", labelTextSize="7pt", verSpacing=-6,
+                   brush=pg.mkBrush(255, 255, 255, 210), pen=pg.mkPen("#bdbdbd"))
 
 
 def _positive(x: np.ndarray, *ys: np.ndarray) -> np.ndarray:
@@ -45,9 +61,9 @@ def _plot(left: str, bottom: str, *, logx: bool, logy: bool) -> pg.PlotWidget:
 def _caption_label() -> QLabel:
     label = QLabel("")
     label.setWordWrap(True)
-    label.setTextFormat(pg.QtCore.Qt.TextFormat.RichText)
+    label.setTextFormat(Qt.TextFormat.RichText)
     label.setStyleSheet("font-size:8pt;")
-    label.setTextInteractionFlags(pg.QtCore.Qt.TextInteractionFlag.TextSelectableByMouse)
+    label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
     return label
 
 
@@ -65,6 +81,14 @@ def _side_by_side(widget: QWidget, caption: QLabel | None, plots, stretches) -> 
     lay.addLayout(row, 1)
 
 
+def _caption(text: str) -> str:
+    return html.escape(text).replace("\n", "<br>")
+
+
+def _indices(results, order) -> list[int]:
+    return list(order) if order else list(range(len(results)))
+
+
 class SpectraPlots(QWidget):
     """PSD (log-log) and CSP (log frequency) of the scored sensor, one curve per log."""
 
@@ -75,11 +99,14 @@ class SpectraPlots(QWidget):
         self.csp = _plot("CSP (µrad²)", "frequency (Hz)", logx=True, logy=False)
         self.csp.setXLink(self.psd)
         # the legend where the CSP is low (it rises to the right)
-        self.csp.addLegend(offset=(10, 10))
+        _legend(self.csp, (10, 10))
         _side_by_side(self, self.caption, (self.psd, self.csp), (1, 1))
         #: log name -> its curves (tests and the legend read them)
         self.psd_curves: dict[str, pg.PlotDataItem] = {}
         self.csp_curves: dict[str, pg.PlotDataItem] = {}
+
+    def plot_widgets(self) -> list[pg.PlotWidget]:
+        return [self.psd, self.csp]
 
     def clear(self) -> None:
         for plot in (self.psd, self.csp):
@@ -88,11 +115,12 @@ class SpectraPlots(QWidget):
         self.csp_curves.clear()
         self.caption.setText("")
 
-    def show_metrics(self, results) -> None:
-        """One PSD and one CSP curve per LogMetrics that has a spectrum."""
+    def show_metrics(self, results, order=()) -> None:
+        """One PSD and one CSP curve per LogMetrics that has a spectrum (`order`: each
+        one's colour index)."""
         self.clear()
         flat = []
-        for i, m in enumerate(results):
+        for i, m in zip(_indices(results, order), results):
             s = m.spectrum
             if s is None or not len(s.frequency_hz):
                 continue
@@ -118,7 +146,8 @@ class SpectraPlots(QWidget):
 
 
 class FrfPlots(QWidget):
-    """Magnitude and phase (measured and model) and coherence of one frequency response."""
+    """Magnitude and phase and coherence of the frequency responses of several logs, one
+    colour each, and the testbed model's once (dashed)."""
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
@@ -129,50 +158,88 @@ class FrfPlots(QWidget):
         self.coherence.setYRange(0.0, 1.05)
         for p in (self.phase, self.coherence):
             p.setXLink(self.magnitude)
-        self.magnitude.addLegend(offset=(-10, -10))
+        # bottom left: the plant's magnitude falls with frequency
+        _legend(self.magnitude, (10, -10))
         _side_by_side(self, self.caption, (self.magnitude, self.phase, self.coherence), (3, 3, 2))
-        #: what is drawn: measured_magnitude, model_magnitude, measured_phase, model_phase,
-        #: coherence (tests read them)
-        self.items: dict[str, pg.PlotDataItem] = {}
+        #: log name -> {"magnitude", "phase", "coherence"} curves; the model's
+        #: {"magnitude", "phase"} (tests read them)
+        self.curves: dict[str, dict[str, pg.PlotDataItem]] = {}
+        self.model: dict[str, pg.PlotDataItem] = {}
+
+    def plot_widgets(self) -> list[pg.PlotWidget]:
+        return [self.magnitude, self.phase, self.coherence]
 
     def clear(self) -> None:
         for p in (self.magnitude, self.phase, self.coherence):
             p.clear()
-        self.items.clear()
+        self.curves.clear()
+        self.model.clear()
         self.caption.setText("")
+        self.caption.setToolTip("")
+
+    def show_frfs(self, results, order=()) -> None:
+        """log_identification.LogFrf of one or more logs (`order`: colour indices)."""
+        self.clear()
+        if not results:
+            return
+        units = {r.measured.units for r in results}
+        self.magnitude.setLabel("left", f"magnitude (dB {units.pop()})" if len(units) == 1
+                                else "magnitude (dB)")
+        with_model = next((r for r in results if r.model is not None), None)
+        if with_model is not None:
+            f = np.asarray(with_model.measured.freq_hz)
+            h = np.asarray(with_model.model)
+            ok = _positive(f, np.abs(h))
+            self.model["magnitude"] = self.magnitude.plot(
+                f[ok], 20.0 * np.log10(np.abs(h[ok])), pen=MODEL_PEN,
+                name=f"model {with_model.model_path}")
+            self.model["phase"] = self.phase.plot(f[ok], np.degrees(np.unwrap(np.angle(h[ok]))),
+                                                  pen=MODEL_PEN)
+        for i, res in zip(_indices(results, order), results):
+            self._one(res, log_colour(i), name=res.path.name)
+        if len(results) == 1:
+            text = results[0].text()
+        else:
+            text = "\n".join(_frf_line(r) for r in results)
+            if with_model is not None:
+                text += (f"\nmodel (dashed): {with_model.model_description} "
+                         f"({with_model.testbed_source})")
+            self.caption.setToolTip("\n\n".join(r.text() for r in results))
+        self.caption.setText(_caption(text))
 
     def show_frf(self, res) -> None:
-        """A log_identification.LogFrf."""
-        self.clear()
+        """One log's response (show_frfs of one)."""
+        self.show_frfs([res])
+
+    def _one(self, res, pen, name: str) -> None:
         m = res.measured
         f = np.asarray(m.freq_hz)
-        mag = m.magnitude_db
-        phase = m.phase_deg
-        units = m.units
-        self.magnitude.setLabel("left", f"magnitude (dB {units})")
+        mag, phase = m.magnitude_db, m.phase_deg
         ok = _positive(f) & np.isfinite(mag)
-        self.items["measured_magnitude"] = self.magnitude.plot(
-            f[ok], mag[ok], pen=MEASURED_PEN, name=f"measured ({res.input_channel} → "
-                                                   f"{res.output_channel})")
+        curves = {"magnitude": self.magnitude.plot(f[ok], mag[ok], pen=pen, name=name)}
         if res.model is not None:
             h = np.asarray(res.model)
             mok = _positive(f, np.abs(h))
-            model_db = 20.0 * np.log10(np.abs(h[mok]))
-            model_phase = np.degrees(np.unwrap(np.angle(h[mok])))
-            self.items["model_magnitude"] = self.magnitude.plot(
-                f[mok], model_db, pen=MODEL_PEN, name=f"model {res.model_path}")
-            self.items["model_phase"] = self.phase.plot(f[mok], model_phase, pen=MODEL_PEN)
-            phase = _align_phase(f, phase, f[mok], model_phase)
+            phase = _align_phase(f, phase, f[mok], np.degrees(np.unwrap(np.angle(h[mok]))))
         pok = _positive(f) & np.isfinite(phase)
-        self.items["measured_phase"] = self.phase.plot(f[pok], phase[pok], pen=MEASURED_PEN)
+        curves["phase"] = self.phase.plot(f[pok], phase[pok], pen=pen)
         coh = np.asarray(m.coherence)
         cok = _positive(f) & np.isfinite(coh)
-        self.items["coherence"] = self.coherence.plot(f[cok], coh[cok], pen=MEASURED_PEN)
-        self.caption.setText(_caption(res.text()))
+        curves["coherence"] = self.coherence.plot(f[cok], coh[cok], pen=pen)
+        self.curves[name] = curves
 
 
-def _caption(text: str) -> str:
-    return html.escape(text).replace("\n", "<br>")
+def _frf_line(res) -> str:
+    """One log's FRF in a line (several logs share the caption)."""
+    m = res.measured
+    line = (f"{res.path.name}: {res.input_channel} → {res.output_channel}, {res.frames} frames, "
+            f"{m.segments} segments ({m.resolution_hz:.3g} Hz)")
+    c = res.comparison
+    if c is not None and c.bins_used:
+        line += f", vs model RMS {c.rms_magnitude_ratio_db:.2f} dB"
+    if res.notes:
+        line += f" ({len(res.notes)} note{'s' if len(res.notes) > 1 else ''}: hover)"
+    return line
 
 
 def _align_phase(f: np.ndarray, phase: np.ndarray, fm: np.ndarray, model_phase: np.ndarray):
@@ -188,20 +255,24 @@ def _align_phase(f: np.ndarray, phase: np.ndarray, fm: np.ndarray, model_phase: 
 
 
 class HysteresisPlot(QWidget):
-    """Friction torque against angle: the lead-in grey, the branches by direction (one
-    curve per direction, the branches apart: a noisy record can have hundreds)."""
+    """Friction torque against angle of one or more logs: a colour per log, the angle
+    rising solid and falling dashed (one curve per direction, the branches apart: a noisy
+    record has hundreds), the lead-in grey."""
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
         self.caption = _caption_label()
-        self.caption.setAlignment(pg.QtCore.Qt.AlignmentFlag.AlignTop)
+        self.caption.setAlignment(Qt.AlignmentFlag.AlignTop)
         self.plot = _plot("friction torque (in-oz)", "angle (µrad)", logx=False, logy=False)
-        self.plot.addLegend(offset=(10, 10))
+        _legend(self.plot, (10, 10))
         # the loop wants room both ways: the caption beside it, not above
         _side_by_side(self, None, (self.plot, self.caption), (3, 2))
-        #: "lead-in", "angle rising", "angle falling" -> the curve (tests read them)
-        self.curves: dict[str, pg.PlotDataItem] = {}
+        #: log name -> {"lead-in", "angle rising", "angle falling"} curves (tests read them)
+        self.curves: dict[str, dict[str, pg.PlotDataItem]] = {}
         self.branches_drawn = 0
+
+    def plot_widgets(self) -> list[pg.PlotWidget]:
+        return [self.plot]
 
     def clear(self) -> None:
         self.plot.clear()
@@ -209,28 +280,111 @@ class HysteresisPlot(QWidget):
         self.branches_drawn = 0
         self.caption.setText("")
 
-    def show_loop(self, res) -> None:
-        """A log_identification.LogHysteresis."""
+    def show_loops(self, results, order=()) -> None:
+        """log_identification.LogHysteresis of one or more logs (`order`: colour indices)."""
         self.clear()
+        for i, res in zip(_indices(results, order), results):
+            self._one(res, i)
+        text = "solid: angle rising, dashed: angle falling, grey: lead-in\n"
+        self.caption.setText(_caption(text + "\n".join(r.text() for r in results)))
+
+    def show_loop(self, res) -> None:
+        self.show_loops([res])
+
+    def _one(self, res, index: int) -> None:
         loop = res.loop
+        name = res.path.name
         lead = loop.lead_in
-        self.curves["lead-in"] = self.plot.plot(loop.angle_rad[lead] * URAD,
-                                                loop.torque_in_oz[lead],
-                                                pen=pg.mkPen("#9e9e9e", width=1), name="lead-in")
+        curves = {"lead-in": self.plot.plot(loop.angle_rad[lead] * URAD, loop.torque_in_oz[lead],
+                                            pen=LEAD_IN_PEN)}
         pieces: dict[str, list[np.ndarray]] = {"angle rising": [], "angle falling": []}
-        for i, b in enumerate(loop.branches):
-            angle, torque = loop.branch_arrays(i)
+        for k, b in enumerate(loop.branches):
+            angle, torque = loop.branch_arrays(k)
             key = "angle rising" if b.direction > 0 else "angle falling"
             # a nan between branches: one curve, not a line from one branch's end to the next
             pieces[key].append(np.column_stack((angle * URAD, torque)))
             pieces[key].append(np.array([[np.nan, np.nan]]))
-        for key, colour in (("angle rising", "#1565c0"), ("angle falling", "#c62828")):
+        for key, style, label in (("angle rising", Qt.PenStyle.SolidLine, name),
+                                  ("angle falling", Qt.PenStyle.DashLine, None)):
             if pieces[key]:
                 xy = np.concatenate(pieces[key])
-                self.curves[key] = self.plot.plot(xy[:, 0], xy[:, 1], connect="finite",
-                                                  pen=pg.mkPen(colour, width=1.5), name=key)
-        self.branches_drawn = len(loop.branches)
-        self.caption.setText(_caption(res.text()))
+                curves[key] = self.plot.plot(xy[:, 0], xy[:, 1], connect="finite",
+                                             pen=log_colour(index, style), name=label)
+        self.curves[name] = curves
+        self.branches_drawn += len(loop.branches)
 
 
-__all__ = ["FrfPlots", "HysteresisPlot", "SpectraPlots", "log_colour"]
+class StepPlots(QWidget):
+    """Step responses of one or more logs: the response (solid) and the reference (dashed)
+    against the time from each log's step, and the figures in a table beside."""
+
+    def __init__(self, parent: QWidget | None = None):
+        super().__init__(parent)
+        self.caption = _caption_label()
+        self.plot = _plot("angle (µrad)", "time from the step (s)", logx=False, logy=False)
+        _legend(self.plot, (-10, -10))
+        self.plot.setClipToView(True)
+        self.plot.setDownsampling(auto=True, mode="peak")
+        self.table = FiguresTable(STEP_COLUMNS)
+        self.table.setToolTip("rise 10-90 %, overshoot and settling (±2 %) against the commanded "
+                              "step; steady-state error over the last 10 % of the record")
+        _side_by_side(self, self.caption, (self.plot, self.table), (3, 2))
+        #: log name -> {"response", "reference"} curves (tests read them)
+        self.curves: dict[str, dict[str, pg.PlotDataItem]] = {}
+
+    def plot_widgets(self) -> list[pg.PlotWidget]:
+        return [self.plot]
+
+    def clear(self) -> None:
+        self.plot.clear()
+        self.curves.clear()
+        self.table.clear_rows()
+        self.caption.setText("")
+
+    def show_steps(self, results, order=(), failures=()) -> None:
+        """analysis_jobs.StepResult of one or more logs (`order`: colour indices) and the
+        logs that have no step figures (path, reason) as rows with the reason."""
+        self.clear()
+        for i, res in zip(_indices(results, order), results):
+            name = res.path.name
+            self.curves[name] = {
+                "response": self.plot.plot(res.time_s, res.response * URAD, pen=log_colour(i),
+                                           name=name),
+                "reference": self.plot.plot(res.time_s, res.reference * URAD,
+                                            pen=log_colour(i, Qt.PenStyle.DashLine))}
+            self.table.add_row(step_row(res.step), colour=log_colour(i).color())
+        for path, reason in failures:
+            self.table.add_row({"log": path.name, "notes": reason}, bad=True)
+        if results:
+            self.caption.setText(_caption("response (reference − error angle) solid, reference "
+                                          "dashed, each log from its own step; the largest "
+                                          "step in the window is scored"))
+
+
+def render_png(plots: list[pg.PlotWidget], width: int = 900) -> bytes:
+    """The plots side by side in one PNG image (each `width` pixels wide, pyqtgraph's
+    ImageExporter at the plot's own aspect)."""
+    images: list[QImage] = []
+    for p in plots:
+        exporter = pg_exporters.ImageExporter(p.getPlotItem())
+        exporter.parameters()["width"] = int(width)
+        images.append(exporter.export(toBytes=True))
+    total = QImage(sum(i.width() for i in images), max(i.height() for i in images),
+                   QImage.Format.Format_ARGB32)
+    total.fill(QColor("white"))
+    painter = QPainter(total)
+    x = 0
+    for image in images:
+        painter.drawImage(x, 0, image)
+        x += image.width()
+    painter.end()
+    data = QByteArray()
+    buffer = QBuffer(data)
+    buffer.open(QIODevice.OpenModeFlag.WriteOnly)
+    total.save(buffer, "PNG")
+    buffer.close()
+    return bytes(data.data())
+
+
+__all__ = ["FrfPlots", "HysteresisPlot", "SpectraPlots", "StepPlots", "log_colour",
+           "render_png"]

@@ -1,6 +1,7 @@
 """The Analysis dock's list of logs: a checkable table of runs (the replayed log, files
-chosen, the logs of a folder).  Metrics and spectra act on the checked ones, FRF and
-hysteresis on the current one.  Only paths here: nothing is read."""
+chosen, the logs of a folder).  Every analysis acts on the checked ones (FRF,
+hysteresis and step on the current one when none is checked).  Only paths here:
+nothing is read."""
 
 from __future__ import annotations
 
@@ -27,8 +28,9 @@ class RunsTable(QTableWidget):
         header = self.horizontalHeader()
         header.setSectionResizeMode(0, QHeaderView.ResizeMode.Stretch)
         header.setSectionResizeMode(1, QHeaderView.ResizeMode.ResizeToContents)
-        self.setToolTip("tick the logs for Metrics (one row and one spectrum each); FRF and "
-                        "Hysteresis use the highlighted log")
+        self.setToolTip("tick the logs to analyse (a table row and a curve each, one colour "
+                        "per log); with none ticked, FRF, Hysteresis and Step use the "
+                        "highlighted log")
 
     def _row_of(self, path: Path) -> int:
         for row in range(self.rowCount()):
