@@ -297,7 +297,8 @@ def _extra_row(ex: dict) -> tuple[dict, list[str], list[str]]:
                        frf_rms_db=_finite(c.rms_magnitude_ratio_db)
                        if c is not None and c.bins_used else None)
         elif metric == "friction_velocity":
-            row.update(friction_velocity_figures(res.result), fv_torque_formula=res.torque_formula)
+            row.update({f"fv_{k}": v for k, v in res.result.summary().items()},
+                       fv_torque_formula=res.torque_formula)
         else:
             ident = res.identification
             slopes = np.array([b.turnaround_slope_in_oz_per_rad for b in res.loop.branches])
@@ -310,23 +311,6 @@ def _extra_row(ex: dict) -> tuple[dict, list[str], list[str]]:
                        hyst_slope_table=ident is not None,
                        hyst_slope_table_file=ex.get("hysteresis_file", ""))
     return row, notes, errors
-
-
-def friction_velocity_figures(fv) -> dict:
-    """The flat figures of a FrictionVelocity: segments, settled ones, their mean speed
-    (deg/s), each direction's mean torque, the friction ((T+ - T-)/2 with both
-    directions settled, else |T| of the one) and the offset ((T+ + T-)/2)."""
-    settled = [s for s in fv.segments if s.settled]
-    pos, neg = fv.mean(+1), fv.mean(-1)
-    friction = fv.running_torque_in_oz
-    if friction is None and (pos or neg):
-        friction = abs((pos or neg)[1])
-    speed = (sum(s.speed_deg_s * s.samples for s in settled) / sum(s.samples for s in settled)
-             if settled else None)
-    return {"fv_segments": len(fv.segments), "fv_settled_segments": len(settled),
-            "fv_speed_deg_s": speed, "fv_torque_pos_in_oz": pos[1] if pos else None,
-            "fv_torque_neg_in_oz": neg[1] if neg else None, "fv_friction_in_oz": friction,
-            "fv_offset_in_oz": fv.offset_in_oz}
 
 
 def _row(name: str, m, error: str, ex: dict) -> dict:

@@ -338,7 +338,8 @@ angle_rad = "{{ref}}"
 
 @pytest.mark.parametrize("table, message", [
     ('[analysis]\nwindow = 5', "check.toml: [analysis]: unknown key(s) window (allowed: start_after_mark, "
-                               "duration_s, sensor, integration_period_s, group_by, compare, baseline)"),
+                               "duration_s, sensor, integration_period_s, group_by, compare, baseline, "
+                               "metrics)"),
     ('[analysis]\nduration_s = -5', "check.toml: [analysis] duration_s = -5 - must be a finite number > 0 "
                                     "(seconds)"),
     ('[analysis]\nduration_s = "60"',
@@ -363,6 +364,13 @@ angle_rad = "{{ref}}"
                                                        "unknown or bad placeholder 'speed'"),
     ('[analysis]\nstart_after_mark = ""', "[analysis] start_after_mark = '' - must be text"),
     ('analysis = 5', "check.toml: [analysis] must be a table"),
+    ('[analysis]\nmetrics = ["stepp"]', "check.toml: [analysis] metrics = ['stepp'] - unknown metric "
+                                        "'stepp' (known: step, frf, hysteresis, friction_velocity"),
+    ('[analysis]\nmetrics = ["step", "bode", "loop"]', "unknown metrics 'bode', 'loop' (known: "),
+    ('[analysis]\nmetrics = "step"', "[analysis] metrics = 'step' - must be a list of metric names"),
+    ('[analysis]\nmetrics = [1]', "[analysis] metrics = [1] - must be a list of metric names"),
+    ('[analysis]\nmetrics = ["jitter"]', "'jitter': jitter and control energy are scored for every log "
+                                         "anyway"),
 ])
 def test_analysis_table_problems_are_named(tmp_path, table, message):
     problems = analysis_problems(tmp_path, table)
@@ -382,7 +390,11 @@ def test_a_good_analysis_table_is_read(tmp_path):
     assert read_campaign(tmp_path / "check.toml")[0].analysis.baseline == str(DESIGN1)
     analysis_problems(tmp_path, "")
     a = read_campaign(tmp_path / "check.toml")[0].analysis
-    assert not a.given and a.sensor == "autocollimator" and a.compare == ""
+    assert not a.given and a.sensor == "autocollimator" and a.compare == "" and a.metrics == ()
+    # the reference metrics: in order, once each
+    assert analysis_problems(tmp_path, '[analysis]\nmetrics = ["frf", "step", "frf"]') == []
+    a = read_campaign(tmp_path / "check.toml")[0].analysis
+    assert a.metrics == ("frf", "step") and a.as_dict()["metrics"] == ["frf", "step"]
 
 
 def test_campaign_report_refuses_a_bad_analysis_table(campaign_run, tmp_path, capsys):

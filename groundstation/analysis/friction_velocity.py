@@ -273,6 +273,22 @@ class FrictionVelocity:
         p, m = self.mean(+1), self.mean(-1)
         return None if p is None or m is None else (p[1] + m[1]) / 2.0
 
+    def summary(self) -> dict[str, float | int | None]:
+        """The record's figures, flat: segments, settled ones, their mean speed (deg/s,
+        sample-weighted), each direction's mean torque, the friction ((T+ - T-)/2 with both
+        directions settled, else |T| of the one) and the offset ((T+ + T-)/2)."""
+        settled = [s for s in self.segments if s.settled]
+        pos, neg = self.mean(+1), self.mean(-1)
+        friction = self.running_torque_in_oz
+        if friction is None and (pos or neg):
+            friction = abs((pos or neg)[1])
+        speed = (sum(s.speed_deg_s * s.samples for s in settled) / sum(s.samples for s in settled)
+                 if settled else None)
+        return {"segments": len(self.segments), "settled_segments": len(settled),
+                "speed_deg_s": speed, "torque_pos_in_oz": pos[1] if pos else None,
+                "torque_neg_in_oz": neg[1] if neg else None, "friction_in_oz": friction,
+                "offset_in_oz": self.offset_in_oz}
+
     def text(self) -> str:
         lines = [f"{len(self.segments)} constant-velocity segment(s)"]
         for s in self.segments:

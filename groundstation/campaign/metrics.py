@@ -8,8 +8,11 @@ and energy by 95 % vs Design #1 under BM1").
 
 `campaign_metrics` scores every log of every recording of a CampaignReport with
 `groundstation.analysis.analyze_log`, over the window the campaign's [analysis] table
-asks for (from a mark step, for duration_s; see AnalysisSpec), and compares them.  A log
-that cannot be scored is a row with its error, never an exception.  `write_metrics`
+asks for (from a mark step, for duration_s; see AnalysisSpec), and compares them.  The
+reference metrics the table names (`metrics = ["step"]`: step, frf, hysteresis,
+friction_velocity) are computed per log over the same window (reference_metrics.py;
+their figures join the row's, a failure is the row's `reference_error`).  A log that
+cannot be scored is a row with its error, never an exception.  `write_metrics`
 writes beside the report:
 
     NAME.metrics.csv     one row per log: run, its matrix values, the window, the figures
@@ -17,6 +20,9 @@ writes beside the report:
     NAME.jitter.png      bar charts (report_figures.py, matplotlib Agg)
     NAME.energy.png
     NAME.relative.png    relative to the baseline (only with a comparison)
+    NAME.step.png, NAME.frf_*.png, NAME.hysteresis.png, NAME.slope_table.png,
+    NAME.friction_velocity.png     the reference metrics' figures (reference_figures.py)
+    NAME.slope_table.LOG.csv       each log's identified DB-DHM slope table (hysteresis)
     NAME.html            all of it in one self-contained page (the PNGs embedded)
     NAME.txt             the report's summary, then the comparison in words
 
@@ -65,6 +71,10 @@ class CampaignMetrics:
     rows: list[dict[str, Any]]
     comparison: list[dict[str, Any]] = field(default_factory=list)
     notes: list[str] = field(default_factory=list)
+    #: what the reference metrics say across the logs (reference_metrics.campaign_summary)
+    reference_summary: dict[str, Any] = field(default_factory=dict)
+    #: row index -> metric -> its result and traces, for the figures (not in the JSON)
+    reference_data: dict[int, dict[str, Any]] = field(default_factory=dict, repr=False)
 
     # ------------------------------------------------------------------ derived
     @property
@@ -104,14 +114,16 @@ class CampaignMetrics:
         """One line per log; a matrix key that is also a column's name is 'matrix_KEY'."""
         head, names, window, figures = self._columns()
         fixed = set(head) | set(window) | set(figures) | {"notes", "error"}
-        columns = head + [csv_variable(k, fixed) for k in names] + window + figures + ["notes", "error"]
+        columns = (head + [csv_variable(k, fixed) for k in names] + window + figures
+                   + ["notes", "error", "reference_error"])
         out = io.StringIO()
         w = csv.writer(out, lineterminator="\n")
         w.writerow(columns)
         for r in self.rows:
             flat = {"run": r["run"], "run_status": r["run_status"], "recording": r["recording"],
                     "file": r["file"], "part": r["part"], "window_start": r["window"]["start"],
-                    "mark": r["window"]["mark"], **r["metrics"], "notes": r["notes"], "error": r["error"]}
+                    "mark": r["window"]["mark"], **r["metrics"], "notes": r["notes"], "error": r["error"],
+                    "reference_error": r.get("reference_error", "")}
             flat.update({csv_variable(k, fixed): v for k, v in r["variables"].items()})
             w.writerow(["" if flat.get(c) is None else flat[c] for c in columns])
         return out.getvalue()
@@ -120,24 +132,29 @@ class CampaignMetrics:
         return {"campaign": self.campaign, "report": self.report_file,
                 "analysis": self.analysis.as_dict(), "window": self.window_text(),
                 "matrix": self.matrix, "rows": self.rows, "comparison": self.comparison,
-                "notes": self.notes}
+                "reference_summary": self.reference_summary, "notes": self.notes}
 
     def text(self) -> str:
         """The rows and the comparison in words, for report.txt and the terminal."""
+        from .reference_metrics import row_lines, summary_lines
+
         lines = [f"metrics ({self.window_text()}):"]
         for r in self.rows:
             head = f"  run {r['run']}" + (f" ({describe(r['variables'])})" if r["variables"] else "")
             head += f" {Path(r['file']).name}"
             if r["error"]:
                 lines.append(f"{head}: ERROR {r['error']}")
+                lines += row_lines(r, self.analysis.metrics)
                 continue
             m = r["metrics"]
             lines.append(f"{head}: jitter std {unit(m.get('std_urad'), 'urad')}, high-pass "
                          f"{unit(m.get('highpass_rms_urad'), 'urad')}, energy "
                          f"{unit(m.get('energy_total_j'), 'J')} over {seconds(r)} s"
                          + (f" [{r['run_status']}]" if r["run_status"] not in ("completed", "") else ""))
+            lines += row_lines(r, self.analysis.metrics)
             if r["notes"]:
                 lines.append(f"    note: {r['notes']}")
+        lines += summary_lines(self.reference_summary)
         if self.comparison:
             a = self.analysis
             lines.append(f"comparison of {a.compare}" + (f" by {a.group_by}" if a.group_by else "")
@@ -168,6 +185,7 @@ def campaign_metrics(report: CampaignReport, campaign: Campaign | None = None, *
     spec = campaign.analysis if campaign is not None else AnalysisSpec()
     matrix = dict(campaign.matrix) if campaign is not None else {}
     rows: list[dict[str, Any]] = []
+    data: dict[int, dict[str, Any]] = {}
     untagged = 0
     for rec in report.recordings:
         files = list(rec.get("files", []))
@@ -178,10 +196,11 @@ def campaign_metrics(report: CampaignReport, campaign: Campaign | None = None, *
         for part, f in enumerate(files, 1):
             if folder is not None and not Path(f).exists() and (Path(folder) / Path(f).name).exists():
                 f = str(Path(folder) / Path(f).name)
-            rows.append(score_log(f, spec, report.campaign, run, variables,
-                                  recording=str(rec.get("name", "")),
-                                  part=part if len(files) > 1 else None,
-                                  run_status=run_status(report, run)))
+            row, data[len(rows)] = _score(f, spec, report.campaign, run, variables,
+                                          recording=str(rec.get("name", "")),
+                                          part=part if len(files) > 1 else None,
+                                          run_status=run_status(report, run))
+            rows.append(row)
         if not files:
             rows.append(_row(str(rec.get("name", "")), "", None, run, variables, run_status(report, run),
                              error="the recording wrote no file"))
@@ -189,7 +208,11 @@ def campaign_metrics(report: CampaignReport, campaign: Campaign | None = None, *
     if untagged:
         notes.append(f"{untagged} recording(s) in the report carry no run or matrix values (a report "
                      f"written before runs were tagged): their rows say run 0 and they are not compared")
-    metrics = CampaignMetrics(report.campaign, report.report_file, spec, matrix, rows, notes=notes)
+    metrics = CampaignMetrics(report.campaign, report.report_file, spec, matrix, rows, notes=notes,
+                              reference_data=data)
+    if spec.metrics:
+        from .reference_metrics import campaign_summary
+        metrics.reference_summary = campaign_summary(rows, spec.metrics)
     if spec.compare:
         metrics.comparison, extra = compare(rows, spec, matrix)
         metrics.notes += extra
@@ -214,15 +237,45 @@ def _row(recording: str, file: str, part: int | None, run: int, variables: dict[
     return {"run": run, "run_status": status, "recording": recording, "file": file, "part": part,
             "variables": variables,
             "window": window or {"start": "", "mark": "", "start_s": None, "stop_s": None},
-            "metrics": metrics or {}, "notes": notes, "error": error}
+            "metrics": metrics or {}, "notes": notes, "error": error, "reference": {},
+            "reference_error": ""}
 
 
 def score_log(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
               variables: dict[str, Any] | None = None, *, recording: str = "",
               part: int | None = None, run_status: str = "") -> dict[str, Any]:
     """One log's row: its window found, `analyze_log` over it; whatever goes wrong is the
-    row's `error` (the log unreadable, a channel missing, an empty window)."""
+    row's `error` (the log unreadable, a channel missing, an empty window).  The
+    reference metrics of `spec.metrics` join it (their failure: `reference_error`)."""
+    return _score(path, spec, campaign, run, variables, recording=recording, part=part,
+                  run_status=run_status)[0]
+
+
+def _score(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
+           variables: dict[str, Any] | None = None, *, recording: str = "",
+           part: int | None = None, run_status: str = "") -> tuple[dict[str, Any], dict[str, Any]]:
+    """(the row, the reference metrics' results for the figures)."""
+    row, unreadable = _score_jitter(path, spec, campaign, run, variables, recording=recording,
+                                    part=part, run_status=run_status)
+    if not spec.metrics or unreadable:
+        return row, {}
+    from .reference_metrics import reference_figures
+
+    w = row["window"]
+    figures, details, data, notes, errors = reference_figures(path, spec.metrics, w["start_s"], w["stop_s"])
+    row["metrics"].update(figures)
+    row["reference"] = details
+    row["reference_error"] = "; ".join(errors)
+    row["notes"] = "; ".join(n for n in [row["notes"], *notes] if n)
+    return row, data
+
+
+def _score_jitter(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
+                  variables: dict[str, Any] | None = None, *, recording: str = "",
+                  part: int | None = None, run_status: str = "") -> tuple[dict[str, Any], bool]:
+    """(the row of jitter and energy, whether the log could not be read at all)."""
     from ..analysis import analyze_log
+    from ..logs import LogError
 
     variables = dict(variables or {})
     notes: list[str] = []
@@ -243,11 +296,12 @@ def score_log(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int
                         integration_period_s=spec.integration_period_s)
     except GroundStationError as exc:
         return _row(recording, str(path), part, run, variables, run_status, window=window,
-                    notes="; ".join(notes), error=str(exc).strip() or type(exc).__name__)
+                    notes="; ".join(notes), error=str(exc).strip() or type(exc).__name__), \
+            isinstance(exc, LogError)
     except Exception as exc:            # a log this code did not foresee: a row, not a crash
         log.exception("scoring %s", path)
         return _row(recording, str(path), part, run, variables, run_status, window=window,
-                    notes="; ".join(notes), error=f"{type(exc).__name__}: {exc}")
+                    notes="; ".join(notes), error=f"{type(exc).__name__}: {exc}"), True
     row = m.row()
     said = row.pop("notes", "")
     if said:
@@ -259,7 +313,7 @@ def score_log(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int
         if scored < wanted * (1 - WINDOW_TOLERANCE):
             notes.append(f"the log ends {scored:.3g} s into the {wanted:g} s window")
     return _row(recording, str(path), part, run, variables, run_status, window=window,
-                metrics=row, notes="; ".join(notes), error=error)
+                metrics=row, notes="; ".join(notes), error=error), False
 
 
 def mark_text(text: str, campaign: str, run: int, variables: dict[str, Any]) -> str:
@@ -476,13 +530,19 @@ def write_metrics(metrics: CampaignMetrics, report: CampaignReport, report_path:
                   html_only: bool = False) -> list[Path]:
     """Write the outputs beside `report_path` (see the module docstring); returns the
     files written.  `html_only`: the page alone (its figures embedded)."""
-    from . import report_figures
+    from . import reference_figures, report_figures
 
     paths = output_paths(report_path)
     paths["html"].parent.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []
     figures = report_figures.bar_figures(metrics)
+    reference = reference_figures.figures(metrics)
     if not html_only:
+        written += reference_figures.write_slope_tables(metrics, report_path)
+        for name, png in reference.items():
+            paths[name] = Path(f"{Path(report_path).with_suffix('')}.{name}.png")
+            paths[name].write_bytes(png)
+            written.append(paths[name])
         paths["csv"].write_text(metrics.csv_text())
         paths["json"].write_text(json.dumps(metrics.as_json(), indent=2, default=str) + "\n")
         written += [paths["csv"], paths["json"]]
@@ -491,7 +551,8 @@ def write_metrics(metrics: CampaignMetrics, report: CampaignReport, report_path:
             written.append(paths[name])
         paths["txt"].write_text(report.summary() + "\n\n" + metrics.text() + "\n")
         written.append(paths["txt"])
-    paths["html"].write_text(report_figures.html_page(metrics, report, figures), encoding="utf-8")
+    paths["html"].write_text(report_figures.html_page(metrics, report, figures, reference),
+                             encoding="utf-8")
     written.append(paths["html"])
     return written
 

@@ -40,11 +40,17 @@ class Step:
         return f"{head} step {self.position} ({self.action})"
 
 
+#: the campaign's reference metrics an [analysis] table may ask for (`metrics = [...]`),
+#: named as `groundstation analyze --metrics` names them (campaign/reference_metrics.py)
+REFERENCE_METRICS = ("step", "frf", "hysteresis", "friction_velocity")
+
+
 @dataclass(frozen=True)
 class AnalysisSpec:
     """A campaign's optional `[analysis]` table: how its logs are scored after the runs
     (campaign/metrics.py).  Without the table every log is scored over its whole length
-    with the defaults and nothing is compared."""
+    with the defaults and nothing is compared.  `metrics` names the campaign's reference
+    metrics (REFERENCE_METRICS), computed per log beside jitter and energy."""
 
     start_after_mark: str = ""           # the scored window starts at this mark ('' : the log's start)
     duration_s: float | None = None      # window length (None: to the log's end)
@@ -53,12 +59,14 @@ class AnalysisSpec:
     group_by: str = ""                   # a matrix key: one comparison per value
     compare: str = ""                    # a matrix key: the values compared in each group
     baseline: Any = None                 # the value of `compare` (as in [matrix]) others are relative to
+    metrics: tuple[str, ...] = ()        # reference metrics per log (REFERENCE_METRICS)
     given: bool = False                  # the file has an [analysis] table
 
     def as_dict(self) -> dict[str, Any]:
         return {"start_after_mark": self.start_after_mark, "duration_s": self.duration_s,
                 "sensor": self.sensor, "integration_period_s": self.integration_period_s,
-                "group_by": self.group_by, "compare": self.compare, "baseline": self.baseline}
+                "group_by": self.group_by, "compare": self.compare, "baseline": self.baseline,
+                "metrics": list(self.metrics)}
 
 
 @dataclass

@@ -14,11 +14,11 @@ from ..errors import GroundStationError
 from ..tomlfile import read_toml
 from .actions import ACTIONS, PATH_KEYS, known_actions
 from .checks import CampaignChecker, show
-from .model import AnalysisSpec, Campaign, CampaignError, Step
+from .model import REFERENCE_METRICS, AnalysisSpec, Campaign, CampaignError, Step
 
 #: the keys of the optional [analysis] table (campaign/metrics.py scores the logs with them)
 ANALYSIS_KEYS = ("start_after_mark", "duration_s", "sensor", "integration_period_s", "group_by",
-                 "compare", "baseline")
+                 "compare", "baseline", "metrics")
 
 
 def load_campaign(path: str | Path, dictionary=None) -> Campaign:
@@ -144,6 +144,12 @@ def read_analysis(table: Any, path: Path, name: str, matrix: dict[str, list[Any]
                                 f"as written in [matrix]")
             else:
                 values["baseline"] = hits[0]
+    if "metrics" in table:
+        problem, names = _metrics_problem(table["metrics"])
+        if problem:
+            bad("metrics", problem)
+        else:
+            values["metrics"] = names
     if "start_after_mark" in table:
         v = table["start_after_mark"]
         if not isinstance(v, str) or not v.strip():
@@ -159,6 +165,22 @@ def read_analysis(table: Any, path: Path, name: str, matrix: dict[str, list[Any]
     if values.get("compare") and "baseline" not in values:
         values["baseline"] = matrix[values["compare"]][0]       # the first value, as the matrix lists it
     return AnalysisSpec(given=True, **values)
+
+
+def _metrics_problem(value: Any) -> tuple[str, tuple[str, ...]]:
+    """(why `metrics = value` is refused ('' : it is not), the names in order, once each)."""
+    known = ", ".join(REFERENCE_METRICS)
+    if not isinstance(value, list) or any(not isinstance(v, str) for v in value):
+        return f"must be a list of metric names, e.g. [\"step\"] (known: {known})", ()
+    always = [v for v in value if v in ("jitter", "energy")]
+    if always:
+        return (f"{', '.join(map(repr, always))}: jitter and control energy are scored for every "
+                f"log anyway; list only the reference metrics ({known})"), ()
+    unknown = [v for v in value if v not in REFERENCE_METRICS]
+    if unknown:
+        return (f"unknown metric{'s' if len(unknown) > 1 else ''} {', '.join(map(repr, unknown))} "
+                f"(known: {known}, as `groundstation analyze --metrics` names them)"), ()
+    return "", tuple(dict.fromkeys(value))
 
 
 def _mark_problem(text: str, name: str, combos: list[dict[str, Any]], steps: list[Step]) -> str:

@@ -140,9 +140,13 @@ def _td(v: Any, text: bool = False) -> str:
     return f'<td class="text">{_e(v)}</td>' if text else f"<td>{_e(v)}</td>"
 
 
-def html_page(metrics: CampaignMetrics, report: CampaignReport, figures: dict[str, bytes]) -> str:
+def html_page(metrics: CampaignMetrics, report: CampaignReport, figures: dict[str, bytes],
+              reference: dict[str, bytes] | None = None) -> str:
     """One page, nothing outside it: the settings, the comparison, the charts (base64
-    data: URIs), every log's figures, the notes and the report's summary."""
+    data: URIs), the reference metrics' tables and charts (`reference`: PNGs of
+    reference_figures.figures), every log's figures, the notes and the report's summary."""
+    from .reference_figures import html_section
+
     a = metrics.analysis
     status = (f"{report.status}: {len(report.completed_runs)} run(s) complete, "
               f"{len(report.failed_runs)} failed; {len(metrics.rows)} log(s) scored")
@@ -167,6 +171,9 @@ def html_page(metrics: CampaignMetrics, report: CampaignReport, figures: dict[st
             data = base64.b64encode(png).decode("ascii")
             out.append(f"<h3>{_e(FIGURE_TITLES.get(name, name))}</h3>"
                        f'<img alt="{_e(FIGURE_TITLES.get(name, name))}" src="data:image/png;base64,{data}">')
+    section = html_section(metrics, reference or {})
+    if section:
+        out.append(section)
     out.append("<h2>Every log</h2>")
     out.append(_rows_table(metrics))
     if metrics.notes:
@@ -217,7 +224,10 @@ def _rows_table(metrics: CampaignMetrics) -> str:
                  _td(Path(r["file"]).name, True), _td(start, True)]
         cells += [_td(num(r["metrics"].get(k)) if isinstance(r["metrics"].get(k), float)
                       else r["metrics"].get(k)) for k, _ in _ROW_FIGURES]
-        cells.append(_td(("ERROR " + r["error"]) if r["error"] else r["notes"], True))
+        said = [("ERROR " + r["error"]) if r["error"] else r["notes"]]
+        if r.get("reference_error"):
+            said.append("reference metric: " + r["reference_error"])
+        cells.append(_td("; ".join(x for x in said if x), True))
         cls = ' class="error"' if r["error"] else ""
         lines.append(f"<tr{cls}>" + "".join(cells) + "</tr>")
     lines.append("</table>")
