@@ -65,23 +65,19 @@ def test_relative_steps_campaign(tmp_path):
         assert (np.diff(d["tick"].astype(np.int64)) == 1).all()
         played = d["profile_index"][d["profile_index"] > 0].astype(np.int64)
         assert played.tolist() == list(range(1, rate + 1))
-        # the smoothed step (at 0.5 s, 10 ms rise) never saturates the coarse motor, and
-        # the fine motor at most for a few samples of the step's transient (within 50 ms
-        # of it).  Design #1's fine command peaks within a few % of the VCM's 16.1 in-oz
-        # there, about 25 ms after the step, so whether a few samples clip depends on the
-        # state the real-time part of the run left (the device time before arming is
-        # machine-dependent); a saturated oscillation - what a raw step causes - would
-        # saturate for far longer.  Design #2 keeps a wide margin (about 10 in-oz).
-        assert not d["coarse_saturated"].any()
-        clipped = d["profile_index"][d["fine_saturated"]].astype(np.int64)
+        # the reference's raw 0.5 mrad step (at 0.5 s): Design #1's coarse motor
+        # saturates for a few control periods right after the jump, its fine motor never;
+        # Design #2 saturates neither (test_relative_raw_step.py holds the whole response)
+        step = rate // 2
+        coarse = d["profile_index"][d["coarse_saturated"]].astype(np.int64)
+        assert not d["fine_saturated"].any()
         if design == "relative_design2":
-            assert len(clipped) == 0
+            assert len(coarse) == 0
         else:
-            step = rate // 2
-            assert len(clipped) <= 6 and ((clipped > step) & (clipped <= step + rate // 20)).all(), clipped
+            assert 1 <= len(coarse) <= 12 and ((coarse > step) & (coarse <= step + rate // 50)).all(), coarse
         # the axis follows the step and comes back
         moved = d["encoder_inner"][d["armed"] > 0]
-        assert 0.9e-3 < moved.max() - moved.min() < 1.6e-3
+        assert 0.45e-3 < moved.max() - moved.min() < 0.8e-3
     saved = report.save(tmp_path / "report.json")
     again = CampaignReport.load(saved)
     assert again.completed_runs == [1, 2] and "COMPLETED" in saved.with_suffix(".txt").read_text()
