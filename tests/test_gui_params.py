@@ -86,3 +86,27 @@ def test_an_unstable_design_is_refused_and_nothing_is_sent(qtbot, window, tmp_pa
     assert "REFUSED" in panel.result.text()
     assert not panel.upload()
     assert not [n for n in sent if n.startswith("PARAM_BEGIN")]
+
+
+def test_a_marginal_design_is_sent_only_with_its_margins_accepted(qtbot, window, tmp_path):
+    panel, session = window.parameters, window.session
+    sent = []
+    session.connect_sim("profiles/testbeds/relative_2dof.toml")
+    qtbot.waitUntil(lambda: panel.device is not None, timeout=60000)
+    session.client.add_command_listener(lambda r: sent.append(r.name))
+    text = (CONTROLLERS / "relative_design2.toml").read_text()
+    slow = tmp_path / "too_little_gain.toml"
+    # c0's gain cut to 6000: stable, phase margin about 6 deg
+    slow.write_text(text.replace('"../testbeds/', f'"{CONTROLLERS.parent / "testbeds"}/')
+                    .replace("gain = 30801", "gain = 6000"))
+    assert panel.load_design(slow)
+    assert panel.report is not None and not panel.report.ok and not panel.report.problems
+    assert panel.result.text().startswith("MARGINAL: stable, but")
+    panel.confirm_override = True
+    panel.override_reason = ""                      # the operator gives no reason
+    assert not panel.upload()
+    assert not [n for n in sent if n.startswith("PARAM_BEGIN")]
+    panel.override_reason = "slow loop for a bearing run-in"
+    assert panel.upload()
+    qtbot.waitUntil(lambda: "verified" in panel.result.text(), timeout=20000)
+    assert "stable but marginal, margins accepted: slow loop for a bearing run-in" in panel.result.text()

@@ -245,7 +245,9 @@ def test_inertial_designs_are_refused_on_the_testbed_model_with_the_gyro_delay(
     values = table_values(designs[name], dictionary=dictionary)
     values["outer_loop_gain"] = 10.0
     slower = validate(designs[name], values, dictionary)
-    assert slower.ok and slower.max_pole_radius < 1 and slower.margins.phase_margin_deg > 0
+    # stable, but not by much: refused as marginal (sent only with the margins accepted)
+    assert not slower.ok and slower.problems == [] and slower.marginal
+    assert slower.max_pole_radius < 1 and slower.margins.phase_margin_deg > 0
 
 
 @pytest.mark.parametrize("name, seconds", [("relative_design2", 1.0), ("inertial_design1", 2.0)])

@@ -44,6 +44,17 @@ def unstable_design(tmp_path):
     return path
 
 
+@pytest.fixture
+def marginal_design(tmp_path):
+    """Relative Design #2 with c0's gain cut to 6000: stable, phase margin about 6 deg and
+    a lower gain margin about 5 dB."""
+    text = (CONTROLLERS / "relative_design2.toml").read_text()
+    path = tmp_path / "too_little_gain.toml"
+    path.write_text(text.replace('"../testbeds/', f'"{ROOT / "profiles" / "testbeds"}/')
+                    .replace("gain = 30801", "gain = 6000"))
+    return path
+
+
 def table_sent(sent: list[str]) -> bool:
     return any(name in TABLE_COMMANDS for name in sent)
 
@@ -114,6 +125,36 @@ def test_the_override_is_recorded_in_the_history_and_the_log(station, unstable_d
                   and "override_reason" in t.data]
     assert tables and tables[-1]["override_reason"] == "identification run, rig clamped"
     assert not tables[-1]["validated"] and tables[-1]["validation_problems"]
+
+
+def test_a_stable_but_marginal_design_is_sent_only_with_its_margins_accepted(station, marginal_design):
+    design = load_design(marginal_design)
+    values = table_values(design, dictionary=station.d)
+    with pytest.raises(ValidationRefused, match="stable but marginal .*phase margin 5.8 deg at 4.4 Hz "
+                                                "is below 30 deg.*accept these margins with a reason"):
+        clear_design(design, values, station.d)
+    with pytest.raises(ScriptError, match="stable but marginal"):
+        station.upload_design(marginal_design)
+    assert not table_sent(station.sent)
+    path = station.start_recording("marginal")
+    record = station.upload_design(marginal_design, accept_risk="slow loop for a bearing run-in")
+    station.stop_recording()
+    assert record.accepted_risk == "marginal" and not record.validated
+    assert record.validation_problems == [
+        "stable but marginal: lower gain margin 5.4 dB at 3.3 Hz is below 6 dB (the loop goes "
+        "unstable if its gain drops that much, e.g. in saturation)",
+        "stable but marginal: phase margin 5.8 deg at 4.4 Hz is below 30 deg"]
+    kept = station.history.records()[-1]
+    assert kept.accepted_risk == "marginal" and kept.validation_problems == record.validation_problems
+    assert "margins accepted: slow loop for a bearing run-in" in kept.source
+    with LogReader(path) as log:
+        table = [t.data for t in log.journal("parameter_table") if t.data.get("crc") == record.crc][-1]
+    assert table["accepted_risk"] == "marginal" and table["validation_problems"] == record.validation_problems
+
+
+def test_an_unstable_design_accepted_says_it_was_refused_not_marginal(station, unstable_design):
+    record = station.upload_design(unstable_design, accept_risk="identification run, rig clamped")
+    assert record.accepted_risk == "refused"
 
 
 def test_a_validated_design_goes_through_and_says_so(station):

@@ -163,8 +163,13 @@ class ParameterPanel(QWidget):
             return None
         self.report = report
         m = report.margins
-        head = "OK: the table may be sent" if report.ok else \
-            f"REFUSED: {'; '.join(report.problems)}"
+        if report.ok:
+            head = "OK: the table may be sent"
+        elif not report.problems:
+            head = (f"MARGINAL: stable, but {'; '.join(report.marginal)} - sent only with these "
+                    f"margins accepted (Upload asks why)")
+        else:
+            head = f"REFUSED: {'; '.join(report.problems)}"
         self._say(head + (f" - {m.text()}" if m is not None else ""), bad=not report.ok)
         self.report_view.setHtml(_report_html(self.design, report))
         self.report_view.setVisible(True)
@@ -222,8 +227,20 @@ class ParameterPanel(QWidget):
         reason = None
         if self.design is not None:
             report = self.run_validation()
-            if report is None or not report.ok:
+            if report is None or report.problems:
                 return False
+            if report.marginal:
+                # stable but marginal: sent only on the operator's stated acceptance of
+                # these margins, which the history and the recording keep
+                reason = self._override_reason(
+                    "Accept these margins",
+                    "The closed loop is stable, but " + "; ".join(report.marginal) + ".\n"
+                    "Why is it safe to run with these margins? (kept in the parameter history "
+                    "and the recording)")
+                if not reason:
+                    self._say("upload cancelled: a marginal design is sent only with its margins "
+                              "accepted and a reason")
+                    return False
         elif problems:
             self._say("refused: " + "; ".join(problems), bad=True)
             return False
@@ -252,13 +269,13 @@ class ParameterPanel(QWidget):
             self.progress.setVisible(True)
             self.session.params_rollback()
 
-    def _override_reason(self) -> str:
+    def _override_reason(self, title: str = "Upload without a design",
+                         question: str = "No design is loaded, so this table's closed loop is not "
+                                         "checked.\nWhy is it safe to send? (kept in the parameter "
+                                         "history and the recording)") -> str:
         if self.override_reason is not None:
             return self.override_reason
-        text, ok = QInputDialog.getText(
-            self, "Upload without a design",
-            "No design is loaded, so this table's closed loop is not checked.\n"
-            "Why is it safe to send? (kept in the parameter history and the recording)")
+        text, ok = QInputDialog.getText(self, title, question)
         return text.strip() if ok else ""
 
     def _confirm(self, text: str) -> bool:
@@ -280,8 +297,12 @@ class ParameterPanel(QWidget):
 
     def _on_uploaded(self, record: UploadRecord) -> None:
         self.uploaded = self._sent
-        gate = ("" if record.validated else
-                f"; NOT validated, sent on the reason: {record.override_reason}")
+        if record.validated:
+            gate = ""
+        elif record.accepted_risk == "marginal":
+            gate = f"; stable but marginal, margins accepted: {record.override_reason}"
+        else:
+            gate = f"; NOT validated, sent on the reason: {record.override_reason}"
         self._say(f"table {record.crc:08x} verified on the device (v{record.version}, "
                   f"read back bit for bit, HOUSEKEEPING agrees){gate}")
         self._fill()

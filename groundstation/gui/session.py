@@ -407,6 +407,10 @@ class Session(QObject):
                 f"device: {record.source}")
         if record.validated:
             self.sig_event.emit("INFO", "parameters", text)
+        elif record.accepted_risk == "marginal":
+            self.sig_event.emit("WARNING", "parameters",
+                                f"{text} - stable but marginal, margins accepted "
+                                f"({'; '.join(record.validation_problems)})")
         else:
             self.sig_event.emit("WARNING", "parameters",
                                 f"{text} - NOT validated ({'; '.join(record.validation_problems)})")

@@ -79,13 +79,29 @@ class Clearance:
     def record(self) -> dict[str, Any]:
         """What the history and the log keep about the gate."""
         return {"validated": not self.overridden, "override_reason": self.override_reason,
-                "validation_problems": list(self.problems), "design": self.design}
+                "accepted_risk": self.risk, "validation_problems": list(self.problems),
+                "design": self.design}
+
+    @property
+    def risk(self) -> str:
+        """What was accepted: "" (validated), "marginal" (a stable loop with margins below
+        the limits), or "refused" (validation refused it: unstable, or no design)."""
+        if not self.overridden:
+            return ""
+        return "marginal" if all(p.startswith(MARGINAL) for p in self.problems) else "refused"
 
     def text(self) -> str:
         if not self.overridden:
             return f"validated ({self.design})" if self.design else "validated"
+        if self.risk == "marginal":
+            return (f"stable, margins accepted ({'; '.join(p[len(MARGINAL):] for p in self.problems)}): "
+                    f"{self.override_reason}")
         return (f"NOT validated ({'; '.join(self.problems)}); sent on the override: "
                 f"{self.override_reason}")
+
+
+#: how an accepted margin shortfall is written among a Clearance's problems
+MARGINAL = "stable but marginal: "
 
 
 def _issue(table_crc: int, design: str, override_reason: str = "",
@@ -114,11 +130,17 @@ def clear_design(design, values: Mapping[str, Any], dictionary: Dictionary,
     crc = _crc(dictionary, values)
     if report.ok:
         return _issue(crc, name), report
+    risks = tuple(report.problems) + tuple(f"{MARGINAL}{m}" for m in report.marginal)
     reason = (accept_risk or "").strip()
     if not reason:
-        raise ValidationRefused("refused by validation, nothing sent: " + "; ".join(report.problems),
+        if report.problems:
+            raise ValidationRefused("refused by validation, nothing sent: " + "; ".join(report.problems),
+                                    report)
+        raise ValidationRefused("refused by validation, nothing sent: the closed loop is stable but "
+                                "marginal (" + "; ".join(report.marginal) + "); to send it, accept "
+                                "these margins with a reason (accept_risk), which is recorded",
                                 report)
-    return _issue(crc, name, reason, tuple(report.problems)), report
+    return _issue(crc, name, reason, risks), report
 
 
 def override_table(values: Mapping[str, Any], dictionary: Dictionary, reason: str,

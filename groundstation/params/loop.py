@@ -46,8 +46,10 @@ INTEGRATOR_TOLERANCE = 1e-6
 # ======================================================================================
 @dataclass
 class ValidationReport:
-    """What `validate` found.  ok: nothing in `problems` (the table may be sent);
-    warnings do not refuse.  Figures are None when the analysis could not run (a table
+    """What `validate` found.  ok: nothing in `problems` and nothing in `marginal` (the
+    table may be sent).  `marginal`: the closed loop is stable but its margins are below
+    MIN_GAIN_MARGIN_DB / MIN_PHASE_MARGIN_DEG - refused unless the operator accepts those
+    stated margins (clearance.clear_design's accept_risk, recorded); warnings do not refuse.  Figures are None when the analysis could not run (a table
     with non-finite coefficients)."""
 
     design: str
@@ -56,6 +58,7 @@ class ValidationReport:
     ok: bool
     problems: list[str]
     warnings: list[str] = field(default_factory=list)
+    marginal: list[str] = field(default_factory=list)   # stable, margins below the limits
     margins: Margins | None = None                 # loop broken at the error e
     inner_margins: Margins | None = None           # inertial: rate loop alone
     outer_margins: Margins | None = None           # inertial: position loop, rate loop closed
@@ -115,7 +118,7 @@ def validate(design: ControllerDesign, values: Mapping[str, Any] | None = None,
         report.inner_margins = margins(lambda f: lm.response(f, "inner"), nyquist)
         report.outer_margins = margins(lambda f: lm.response(f, "outer"), nyquist)
     if not report.unstable_poles:
-        report.warnings += _margin_warnings(report.margins)
+        report.marginal += _margin_shortfalls(report.margins)
     report.match = _match(design, lm, cascades)
     cl = report.match.closed_loop
     if not report.unstable_poles and not cl.within(MATCH_LIMIT_PCT, MATCH_LIMIT_DEG):
@@ -125,7 +128,7 @@ def validate(design: ControllerDesign, values: Mapping[str, Any] | None = None,
             f"{cl.phase_at_hz:.1f} Hz below {MATCH_BAND_HZ:g} Hz (limit {MATCH_LIMIT_PCT:g} % / "
             f"{MATCH_LIMIT_DEG:g} deg): set design.prewarp_hz to the frequency of a lightly damped "
             f"pole or zero of the controller near there")
-    report.ok = not problems
+    report.ok = not problems and not report.marginal
     return report
 
 
@@ -209,11 +212,16 @@ def _instability_text(poles: list[complex], rate_hz: float, design) -> str:
             f"gain or add phase near {f:.0f} Hz")
 
 
-def _margin_warnings(m: Margins) -> list[str]:
+def _margin_shortfalls(m: Margins) -> list[str]:
+    """The margins of a stable loop below the limits, each as the risk it is."""
     out = []
     if m.gain_margin_db < MIN_GAIN_MARGIN_DB:
         out.append(f"gain margin {m.gain_margin_db:.1f} dB at {m.gain_margin_hz:.1f} Hz is below "
                    f"{MIN_GAIN_MARGIN_DB:g} dB")
+    if m.lower_gain_margin_db is not None and m.lower_gain_margin_db < MIN_GAIN_MARGIN_DB:
+        out.append(f"lower gain margin {m.lower_gain_margin_db:.1f} dB at {m.lower_gain_margin_hz:.1f} Hz "
+                   f"is below {MIN_GAIN_MARGIN_DB:g} dB (the loop goes unstable if its gain drops "
+                   f"that much, e.g. in saturation)")
     if m.crossover_hz is not None and m.phase_margin_deg < MIN_PHASE_MARGIN_DEG:
         out.append(f"phase margin {m.phase_margin_deg:.1f} deg at {m.crossover_hz:.1f} Hz is below "
                    f"{MIN_PHASE_MARGIN_DEG:g} deg")
@@ -271,6 +279,9 @@ def report_lines(design, report) -> list[str]:
         out.append(f"warning:  {w}")
     if report.ok:
         out.append("OK: the table may be sent")
+    elif not report.problems:
+        out.append(f"MARGINAL: the closed loop is stable, but {'; '.join(report.marginal)}: refused "
+                   f"unless the risk of these margins is accepted with a reason (recorded)")
     else:
         out.append(f"REFUSED: {len(report.problems)} problem(s)")
         out += [f"problem:  {p}" for p in report.problems]

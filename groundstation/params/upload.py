@@ -82,6 +82,9 @@ class UploadRecord:
     validated: bool = True
     override_reason: str = ""
     validation_problems: list[str] = field(default_factory=list)
+    #: what the override accepted: "marginal" (a stable loop below the margin limits, the
+    #: shortfalls in validation_problems), "refused" (what validation refused), "" none
+    accepted_risk: str = ""
 
 
 def entry_differences(dictionary: Dictionary, a: Mapping[str, Any], b: Mapping[str, Any]) -> list[str]:
@@ -329,6 +332,7 @@ class ParameterLoader:
             record.validated = bool(gate["validated"])
             record.override_reason = str(gate["override_reason"])
             record.validation_problems = list(gate["validation_problems"])
+            record.accepted_risk = str(gate.get("accepted_risk", ""))
         self.last_uploaded = record
         self.history.add(record, blob, previous.blob)
         if self.journal is not None:

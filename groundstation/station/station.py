@@ -359,7 +359,10 @@ class Station:
             if on_report is not None and exc.report is not None:
                 on_report(exc.report)
             raise ScriptError(f"{source}: {exc}") from exc
-        if clearance.overridden:
+        if clearance.risk == "marginal":
+            self.echo(f"WARNING: uploading {source} with its margins accepted: {clearance.text()}")
+            source += f" (margins accepted: {clearance.override_reason})"
+        elif clearance.overridden:
             self.echo(f"WARNING: uploading {source} although it is not validated "
                       f"({'; '.join(clearance.problems)}); reason given: {clearance.override_reason}")
             source += f" (not validated; accepted: {clearance.override_reason})"
