@@ -33,7 +33,7 @@ How
    DB-DHM slope table the last percent takes longest), so only the last
    ``settled_fraction`` (half) of each segment is averaged.  Its two halves are compared
    (``torque_drift_in_oz``): a segment whose torque still moves by more than
-   ``settle_tolerance`` (5 %) of its mean between them is flagged unsettled - its mean
+   ``settle_tolerance`` (2 %) of its mean between them is flagged unsettled - its mean
    is then a bound, not the running friction.
 5. **The point.**  velocity = the angle travelled over the settled part / its duration
    (signed); torque = its mean (signed), with its standard deviation.
@@ -64,7 +64,7 @@ DEFAULT_MIN_SPEED_RAD_S = 1.0e-5
 #: the torque is averaged over this last fraction of each segment
 DEFAULT_SETTLED_FRACTION = 0.5
 #: the settled part's halves may differ by this fraction of its mean torque
-DEFAULT_SETTLE_TOLERANCE = 0.05
+DEFAULT_SETTLE_TOLERANCE = 0.02
 #: ... or by this much [in-oz], whichever is larger (a torque near zero)
 SETTLE_FLOOR_IN_OZ = 0.01
 #: a shorter plateau is not a segment [s]
@@ -382,8 +382,9 @@ def segments_from_blocks(blocks: VelocityBlocks, *, tolerance: float = DEFAULT_T
     unsettled = sum(not s.settled for s in segments)
     if unsettled:
         notes.append(f"{unsettled} segment(s) whose torque still drifts by more than "
-                     f"{settle_tolerance * 100:g} % over the settled part (too short a stroke "
-                     f"for the friction to reach its running value): not in the direction means")
+                     f"{settle_tolerance * 100:g} % over the settled part (the friction not yet "
+                     f"at its running value - too short a stroke - or the loop still ringing): "
+                     f"not in the direction means")
     return FrictionVelocity(segments=tuple(segments), blocks=blocks,
                             min_speed_rad_s=float(min_speed_rad_s), tolerance=tolerance,
                             settled_fraction=settled_fraction, notes=tuple(notes))

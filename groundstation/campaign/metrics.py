@@ -259,15 +259,8 @@ def _score(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 
                                     part=part, run_status=run_status)
     if not spec.metrics or unreadable:
         return row, {}
-    from .reference_metrics import reference_figures
-
-    w = row["window"]
-    figures, details, data, notes, errors = reference_figures(path, spec.metrics, w["start_s"], w["stop_s"])
-    row["metrics"].update(figures)
-    row["reference"] = details
-    row["reference_error"] = "; ".join(errors)
-    row["notes"] = "; ".join(n for n in [row["notes"], *notes] if n)
-    return row, data
+    from .reference_metrics import add_to_row
+    return row, add_to_row(row, path, spec.metrics)
 
 
 def _score_jitter(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,

@@ -88,6 +88,19 @@ def reference_figures(path: str | Path, names: tuple[str, ...], start_s: float |
     return figures, details, data, notes, errors
 
 
+def add_to_row(row: dict[str, Any], path: str | Path, names: tuple[str, ...]) -> dict[str, Any]:
+    """The reference metrics of a campaign-metrics row's log, over its window, added to
+    the row (figures, `reference` details, notes, `reference_error`); their results for
+    the figures returned."""
+    w = row["window"]
+    figures, details, data, notes, errors = reference_figures(path, names, w["start_s"], w["stop_s"])
+    row["metrics"].update(figures)
+    row["reference"] = details
+    row["reference_error"] = "; ".join(errors)
+    row["notes"] = "; ".join(n for n in [row["notes"], *notes] if n)
+    return data
+
+
 def _step(path, start_s, stop_s):
     from ..analysis.log_step import step_from_log
 
@@ -378,11 +391,15 @@ def row_lines(row: dict[str, Any], names: tuple[str, ...]) -> list[str]:
                          f"{s['speed_deg_s']:.4g} deg/s: torque {s['torque_in_oz']:+.4g} in-oz "
                          f"(std {s['torque_std_in_oz']:.3g}, drift {s['torque_drift_in_oz']:+.3g})"
                          + ("" if s["settled"] else " not settled"))
-        lines.append(f"    friction_velocity: friction {_g(m.get('fv_friction_in_oz'), 'in-oz')} at "
-                     f"{_g(m.get('fv_speed_deg_s'), 'deg/s')} ({m.get('fv_settled_segments')} of "
-                     f"{m.get('fv_segments')} segments settled)"
-                     + ("" if m.get("fv_offset_in_oz") is None
-                        else f", offset {m['fv_offset_in_oz']:+.3g} in-oz"))
+        if not m.get("fv_settled_segments"):
+            lines.append(f"    friction_velocity: none of the {m.get('fv_segments')} segments settled: "
+                         f"no running friction from this log")
+        else:
+            lines.append(f"    friction_velocity: friction {_g(m.get('fv_friction_in_oz'), 'in-oz')} at "
+                         f"{_g(m.get('fv_speed_deg_s'), 'deg/s')} ({m.get('fv_settled_segments')} of "
+                         f"{m.get('fv_segments')} segments settled)"
+                         + ("" if m.get("fv_offset_in_oz") is None
+                            else f", offset {m['fv_offset_in_oz']:+.3g} in-oz"))
     if row.get("reference_error"):
         lines.append(f"    reference metric error: {row['reference_error']}")
     return lines
@@ -411,5 +428,5 @@ def summary_lines(summary: dict[str, Any]) -> list[str]:
     return lines
 
 
-__all__ = ["FRF_OUTPUT", "MIN_COHERENCE", "campaign_summary", "excited_current",
+__all__ = ["FRF_OUTPUT", "MIN_COHERENCE", "add_to_row", "campaign_summary", "excited_current",
            "reference_figures", "row_lines", "summary_lines"]
