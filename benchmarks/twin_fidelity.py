@@ -30,7 +30,9 @@ sys.path.insert(0, str(ROOT))
 
 from groundstation.analysis.energy import control_energy  # noqa: E402
 from groundstation.analysis.jitter import los_jitter  # noqa: E402
-from groundstation.basemotion.synthesis import load_profile  # noqa: E402
+from groundstation.basemotion.psd import load_psd  # noqa: E402
+from groundstation.basemotion.stage import BaseStageModel  # noqa: E402
+from groundstation.basemotion.synthesis import make_profile  # noqa: E402
 from groundstation.dictionary import load_dictionary  # noqa: E402
 from groundstation.params.design import load_design, table_values  # noqa: E402
 from groundstation.plant.testbed import load_testbed  # noqa: E402
@@ -127,8 +129,9 @@ def inertial_run(design: str, bm: str, args) -> dict[str, float]:
     run(eng, args.settle)
     volts = None
     if bm != "none":
-        profile = load_profile(BASE_MOTION / f"{bm}.csv", load_testbed(TESTBEDS / "inertial_2dof.toml"),
-                               seed=args.profile_seed)
+        psd = load_psd(BASE_MOTION / f"{bm}.csv")
+        profile = make_profile(psd, BaseStageModel.from_testbed(load_testbed(TESTBEDS / "inertial_2dof.toml")),
+                               seed=args.profile_seed, target_rms_rad=psd.rms_rad() * args.bm_scale)
         volts = drive_volts(profile, args.seconds)
     out, truth, faults = run(eng, args.seconds, volts)
     f = figures(out, truth, tb)
@@ -176,6 +179,7 @@ def main() -> int:
     ap.add_argument("--settle", type=float, default=5.0)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--profile-seed", type=int, default=0)
+    ap.add_argument("--bm-scale", type=float, default=1.0, help="scale the profile's RMS")
     ap.add_argument("--set", action="append", default=[], help="SECTION.KEY=VALUE of the plant's testbed")
     ap.add_argument("--param", action="append", default=[], help="NAME=VALUE of the uploaded table")
     args = ap.parse_args()
