@@ -340,6 +340,7 @@ def html_section(metrics: CampaignMetrics, pngs: dict[str, bytes]) -> str:
                                       m.get("hyst_coulomb_in_oz"), m.get("hyst_turnaround_slope_in_oz_per_rad"),
                                       m.get("hyst_late_slope_in_oz_per_rad"), m.get("hyst_slope_f0"),
                                       Path(m["hyst_slope_table_file"]).name if m.get("hyst_slope_table_file")
+                                      else "identified, not written" if m.get("hyst_slope_table")
                                       else "none"]
                            for _, r in rows if "hysteresis" in r["reference"] for m in [r["metrics"]]]))
     if "friction_velocity" in names:
