@@ -356,3 +356,23 @@ def test_the_step_tab_shows_the_figures_of_a_step_log(qtbot, panel, logs, tmp_pa
             assert table.item_of(key, 0).text() == format(expected[key], fmt), key
     assert panel.export_table("step", tmp_path / "step.json")
     assert json.loads((tmp_path / "step.json").read_text()) == rows
+
+
+def test_the_measured_phase_is_drawn_about_the_model_so_no_noisy_bin_costs_a_turn():
+    """A model whose phase falls through -540 deg, a measurement equal to it within a few
+    degrees except one wild bin (an antiresonance): drawn about the model, every other
+    bin stays within those degrees of the model's unwrapped phase - unwrapping the
+    measurement alone would carry the wild bin's turn into everything after it."""
+    from groundstation.gui.analysis_plots import _phase_about_model
+    f = np.linspace(0.0, 200.0, 401)
+    model = np.exp(-1j * 2 * np.pi * f * 0.008) / (1 + 1j * f / 30.0)      # delay + lag
+    rng = np.random.default_rng(4)
+    wobble = np.radians(rng.uniform(-5, 5, len(f)))
+    measured = model * np.exp(1j * wobble)
+    measured[200] = -measured[200] * 0.01                                # the wild bin
+    naive = np.degrees(np.unwrap(np.angle(measured)))
+    drawn = _phase_about_model(f, measured, model, naive)
+    model_phase = np.degrees(np.unwrap(np.angle(model[1:])))
+    others = np.r_[1:200, 201:401]
+    assert np.max(np.abs(drawn[others] - model_phase[others - 1])) < 5.01
+    assert model_phase[-1] < -540

@@ -1,8 +1,9 @@
 """The Analysis dock's plots (pyqtgraph): spectra, frequency responses against the model,
 hysteresis loops and step responses, one curve (one colour) per log.  They draw results
 the analysis modules computed; the only arithmetic here is for display (units, dropping
-the 0 Hz bin a log axis cannot show, lining the measured phase up with the model's by
-whole turns).  `render_png` makes one image of a tab's plots for an export.
+the 0 Hz bin a log axis cannot show, drawing the measured phase about the model's:
+model phase + arg(H / model), so a noisy bin can never put the rest of the curve a turn
+away).  `render_png` makes one image of a tab's plots for an export.
 """
 
 from __future__ import annotations
@@ -218,9 +219,7 @@ class FrfPlots(QWidget):
         ok = _positive(f) & np.isfinite(mag)
         curves = {"magnitude": self.magnitude.plot(f[ok], mag[ok], pen=pen, name=name)}
         if res.model is not None:
-            h = np.asarray(res.model)
-            mok = _positive(f, np.abs(h))
-            phase = _align_phase(f, phase, f[mok], np.degrees(np.unwrap(np.angle(h[mok]))))
+            phase = _phase_about_model(f, np.asarray(m.response), np.asarray(res.model), phase)
         pok = _positive(f) & np.isfinite(phase)
         curves["phase"] = self.phase.plot(f[pok], phase[pok], pen=pen)
         coh = np.asarray(m.coherence)
@@ -242,16 +241,21 @@ def _frf_line(res) -> str:
     return line
 
 
-def _align_phase(f: np.ndarray, phase: np.ndarray, fm: np.ndarray, model_phase: np.ndarray):
-    """The measured unwrapped phase shifted by whole turns to start near the model's
-    (each curve is unwrapped from its own first bin)."""
-    both = np.isfinite(phase) & np.isin(f, fm) & (f > 0)
-    if not np.any(both):
-        return phase
-    i = int(np.flatnonzero(both)[0])
-    j = int(np.searchsorted(fm, f[i]))
-    turns = np.round((model_phase[j] - phase[i]) / 360.0)
-    return phase + 360.0 * turns
+def _phase_about_model(f: np.ndarray, measured: np.ndarray, model: np.ndarray,
+                       phase: np.ndarray) -> np.ndarray:
+    """The measured phase drawn about the model's: the model's unwrapped phase plus the
+    wrapped angle of measured/model, bin by bin.  Unwrapping the measured phase on its
+    own lets one noisy bin (an antiresonance, a low-coherence bin) shift everything
+    after it by a turn; the difference to the model is small where the model is right,
+    so no turn is ever lost.  Where the model is undefined the measured phase stays."""
+    out = np.array(phase, dtype=float, copy=True)
+    usable = _positive(f, np.abs(model)) & np.isfinite(measured) & (np.abs(measured) > 0)
+    if not np.any(usable):
+        return out
+    model_phase = np.full(len(f), np.nan)
+    model_phase[usable] = np.degrees(np.unwrap(np.angle(model[usable])))
+    out[usable] = model_phase[usable] + np.degrees(np.angle(measured[usable] / model[usable]))
+    return out
 
 
 class HysteresisPlot(QWidget):
