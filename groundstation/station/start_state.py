@@ -88,8 +88,9 @@ class RigLimits:
 class StartStateMonitor:
     """A HIGH_RATE subscriber holding the last `hold_s` seconds of the start-state channels."""
 
-    def __init__(self, limits: RigLimits, criteria: StartCriteria = StartCriteria(),
-                 rate_hz: float = 1200.0):
+    def __init__(self, limits: RigLimits, rate_hz: float, criteria: StartCriteria = StartCriteria()):
+        """rate_hz: the control rate (the dictionary's), which sets how many frames the
+        hold window is."""
         self.limits = limits
         self.criteria = criteria
         self.rate_hz = float(rate_hz)

@@ -447,7 +447,7 @@ class Station:
         if self.state.fault and not self.state.armed:
             self.client.command("DISARM")
         criteria = criteria or StartCriteria()
-        monitor = StartStateMonitor(RigLimits.from_testbed(self.testbed), criteria, self.d.control_rate_hz)
+        monitor = StartStateMonitor(RigLimits.from_testbed(self.testbed), self.d.control_rate_hz, criteria)
         self.client.subscribe(monitor)
         try:
             self.clock.advance(max_seconds, progress, until=lambda: not monitor.problems())
