@@ -264,4 +264,5 @@ def _cmd_report(args) -> int:
                              folder=report_path.parent)
     if metrics is None:
         return EXIT_FAILED
-    return EXIT_FAILED if any(r["error"] for r in metrics.rows) else EXIT_OK
+    # a log that could not be scored - its jitter/energy or its campaign's own metric - fails
+    return EXIT_FAILED if any(r["error"] or r.get("reference_error") for r in metrics.rows) else EXIT_OK

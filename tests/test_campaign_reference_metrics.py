@@ -381,14 +381,15 @@ def test_friction_velocity_rows_per_run_and_the_fit_across_runs(passes):
 # --------------------------------------------------------------------------- failures
 def test_a_metric_that_does_not_fit_a_log_is_its_rows_reference_error(steps, tmp_path, capsys):
     """Friction against velocity on the step logs: no constant-velocity pass - each row
-    says so, the jitter, energy and comparison are still there, the report is written."""
+    says so, the jitter, energy and comparison are still there, the report is written, and
+    the command's exit status says not everything could be scored."""
     other = tmp_path / "passes_on_steps.toml"
     other.write_text((steps.parent / "steps_short.toml").read_text()
                      .replace('metrics = ["step"]', 'metrics = ["friction_velocity"]'))
     to = tmp_path / "copy"
     to.mkdir()
     shutil.copy(steps / "report.json", to / "report.json")      # names the logs where they are
-    assert main(["campaign", "report", str(to / "report.json"), "--campaign", str(other)]) == 0
+    assert main(["campaign", "report", str(to / "report.json"), "--campaign", str(other)]) == 1
     capsys.readouterr()
     rows = rows_of(to)
     assert len(rows) == 2
