@@ -83,31 +83,44 @@ def test_relative_steps_campaign(tmp_path):
     assert again.completed_runs == [1, 2] and "COMPLETED" in saved.with_suffix(".txt").read_text()
 
 
-def test_inertial_campaign_produces_nine_logs(tmp_path):
-    """Nine runs, nine valid logs.  Runs whose design cannot hold the base motion fault;
-    with on_run_failure = "next_run" each is a result in the report, made safe, and the
-    campaign goes on."""
+def test_inertial_campaign_produces_twelve_logs_from_verified_start_states(tmp_path):
+    """Twelve runs (an open-loop baseline and three designs under BM1-BM3), twelve valid
+    logs.  Every run that starts was checked at rest, in range and unfaulted first (its
+    log says so); the baseline uploads nothing and never arms.  A run that cannot hold
+    the base motion, or cannot start because the rig is not ready, is a result in the
+    report with its reason (on_run_failure = "next_run"), made safe, and the campaign
+    goes on."""
     report, generator_on, armed = run_campaign(CAMPAIGNS / "inertial_bm.toml", tmp_path,
                                                max_step_seconds=0.5)
     assert report.status in ("completed", "completed_with_failures"), report.summary()
-    assert len(report.recordings) == 9
-    assert sorted(report.completed_runs + [int(r) for r in report.failed_runs]) == list(range(1, 10))
+    assert len(report.recordings) == 12
+    assert sorted(report.completed_runs + [int(r) for r in report.failed_runs]) == list(range(1, 13))
     assert generator_on is False and not armed
     names = [Path(r["files"][0]).name for r in report.recordings]
+    assert [n.split("_run")[0].split("inertial_bm_")[1] for n in names[:3]] == \
+        ["open_loop_BM1", "open_loop_BM2", "open_loop_BM3"]
     assert any("inertial_design2_friction_comp_BM3" in n for n in names)
     for run, rec in enumerate(report.recordings, 1):
         _, tables = check_log(rec["files"][0], "inertial_bm_", min_frames=1)
-        assert any("accepted" in t.data.get("source", "") for t in tables)    # the upload, with its reason
         with LogReader(rec["files"][0]) as log:
             d = log.read("HIGH_RATE", ["armed", "fault"])
+            texts = [e.data.get("text", "") for e in log.journal("event")]
+        baseline = run <= 3
+        if baseline:
+            assert len(tables) == 1 and not d["armed"].any()      # nothing uploaded, never armed
         if run in report.completed_runs:
-            # both dwells (5 s settling and 60 s of base motion, capped at 0.5 s each) were
-            # played armed in full; the real-time parts between steps add a varying number
-            assert np.count_nonzero(d["armed"]) >= 2 * 600
+            assert any(t.startswith("start state verified:") for t in texts)
+            if not baseline:
+                assert any("accepted" in t.data.get("source", "") for t in tables)
+                # both dwells (5 s settling and 60 s of base motion, capped at 0.5 s each)
+                # were played armed in full
+                assert np.count_nonzero(d["armed"]) >= 2 * 600
         else:
-            # a run that faulted: the log goes on to the fault it was stopped for
-            assert "fault" in report.failed_runs[str(run)]
-            assert d["fault"][-1]
+            reason = report.failed_runs[str(run)]
+            if "settle" in reason:          # the rig was not ready: the run never started
+                assert "out of range" in reason or "not at rest" in reason
+            else:                           # a run that faulted: the log goes on to the fault
+                assert "fault" in reason and d["fault"][-1]
 
 
 def failing_campaign(tmp_path) -> Path:
@@ -214,7 +227,7 @@ def test_malformed_campaigns_name_the_step_and_field(tmp_path, text, message):
 def test_cli_show_and_run(tmp_path, capsys):
     assert main(["campaign", "show", str(CAMPAIGNS / "inertial_bm.toml")]) == 0
     out = capsys.readouterr().out
-    assert "9 run(s)" in out and "play_base_motion" in out
+    assert "12 run(s)" in out and "play_base_motion" in out
     code = main(["campaign", "run", str(CAMPAIGNS / "relative_steps.toml"), "--fast",
                  "--log-folder", str(tmp_path / "logs"), "--max-step-seconds", "0.5"])
     out = capsys.readouterr().out

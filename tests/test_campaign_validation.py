@@ -294,3 +294,27 @@ def test_help_documents_exit_status_130(capsys):
 def test_max_step_seconds_must_be_positive(bad):
     with pytest.raises(SystemExit):
         build_parser().parse_args(["campaign", "run", "x.toml", "--max-step-seconds", bad])
+
+
+# --------------------------------------------------------------------------- skip_if
+def test_skip_if_leaves_a_step_out_of_the_runs_whose_matrix_value_matches(tmp_path):
+    path = write(tmp_path, '[[run]]\naction = "set_mode"\nmode = "INERTIAL"\n'
+                           'skip_if = {design = "open_loop"}\n\n'
+                           '[[run]]\naction = "dwell"\nseconds = 1.0\n',
+                 matrix=f'[matrix]\ndesign = ["open_loop", "{DESIGN2}"]\n')
+    c = load_campaign(path)
+    runs = {run: [s.action for s in c.steps if s.run == run] for run in (1, 2)}
+    assert runs == {1: ["dwell"], 2: ["set_mode", "dwell"]}
+
+
+@pytest.mark.parametrize("cond, words", [
+    ('skip_if = "open_loop"', "skip_if must be a table of matrix keys and values"),
+    ('skip_if = {profile = "x"}', "skip_if names 'profile', which is not a [matrix] key (known: design)"),
+    ('skip_if = {design = "closed_loop"}', "skip_if design = ['closed_loop']: not among the matrix's values"),
+])
+def test_a_malformed_skip_if_is_refused_with_what_is_wrong(tmp_path, cond, words):
+    path = write(tmp_path, f'[[run]]\naction = "dwell"\nseconds = 1.0\n{cond}\n',
+                 matrix=f'[matrix]\ndesign = ["open_loop", "{DESIGN2}"]\n')
+    with pytest.raises(CampaignError) as err:
+        load_campaign(path)
+    assert any(words in p and "run 1 step 1 (dwell)" in p for p in err.value.problems), err.value.problems

@@ -67,6 +67,9 @@ def read_campaign(path: str | Path, dictionary=None) -> tuple[Campaign | None, l
 
     def add(phase: str, run: int, items: list[dict], variables: dict[str, Any]) -> None:
         for position, item in enumerate(items, 1):
+            if _skipped(item, matrix, variables, problems, f"{path.name}: "
+                        f"{f'run {run}' if run else phase} step {position}"):
+                continue
             step = _step(item, problems, len(steps), phase, run, position, variables, path, name)
             if step is not None:
                 steps.append(step)
@@ -230,6 +233,37 @@ def _text_field(table: dict, key: str, path: Path, where: str) -> str:
 _WHOLE_PLACEHOLDER = re.compile(r"^\{(\w+)\}$")
 
 
+def _skipped(item: dict, matrix: dict[str, list[Any]], variables: dict[str, Any],
+             problems: list[str], head: str) -> bool:
+    """True when the step's `skip_if` matches this run's matrix values, so the run has no
+    such step.  `skip_if = {design = "open_loop"}` (a value as [matrix] writes it, or a
+    list of them) leaves the step out of every run whose `design` is that value: e.g. no
+    upload and no arming in an open-loop baseline run.  (_step ignores the key.)  A
+    malformed skip_if is a problem, and the step is kept."""
+    cond = item.get("skip_if")
+    if cond is None:
+        return False
+    where = f"{head} ({item.get('action')})"
+    if not isinstance(cond, dict) or not cond:
+        problems.append(f"{where}: skip_if must be a table of matrix keys and values, e.g. "
+                        f"skip_if = {{design = \"open_loop\"}}")
+        return False
+    hit = True
+    for key, wanted in cond.items():
+        values = wanted if isinstance(wanted, list) else [wanted]
+        if key not in matrix:
+            problems.append(f"{where}: skip_if names {key!r}, which is not a [matrix] key "
+                            f"(known: {', '.join(sorted(matrix)) or 'none'})")
+            return False
+        stray = [v for v in values if v not in matrix[key]]
+        if stray:
+            problems.append(f"{where}: skip_if {key} = {stray!r}: not among the matrix's values "
+                            f"{matrix[key]!r}")
+            return False
+        hit = hit and variables.get(key) in values
+    return hit
+
+
 def _step(item: dict, problems: list[str], index: int, phase: str, run: int, position: int,
           variables: dict[str, Any], path: Path, campaign: str) -> Step | None:
     """One step with its placeholders filled and its files resolved, or None (the
@@ -242,7 +276,7 @@ def _step(item: dict, problems: list[str], index: int, phase: str, run: int, pos
         return None
     where = f"{head} ({action})"
     required, allowed = handler.required, handler.keys
-    keys = set(item) - {"action"}
+    keys = set(item) - {"action", "skip_if"}
     ok = True
     if required - keys:
         problems.append(f"{where}: missing {', '.join(sorted(required - keys))}")
@@ -254,7 +288,7 @@ def _step(item: dict, problems: list[str], index: int, phase: str, run: int, pos
     names = run_names(campaign, run, variables)
     args = {}
     for k, v in item.items():
-        if k == "action":
+        if k in ("action", "skip_if"):
             continue
         if isinstance(v, str):
             whole = _WHOLE_PLACEHOLDER.match(v)
