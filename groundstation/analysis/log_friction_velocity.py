@@ -36,7 +36,8 @@ from .friction_velocity import (DEFAULT_BLOCK_S, DEFAULT_MIN_SEGMENT_S, DEFAULT_
                                 DEFAULT_TOLERANCE, BlockAccumulator, FrictionVelocity,
                                 segments_from_blocks)
 from .log_identification import (PACKET, LogIdentificationError, NoExcitationError,
-                                 WindowTooShortError, _require, _testbed_info, _window_rows)
+                                 WindowTooShortError, _require, _testbed_info, _window_rows,
+                                 coarse_torque_constant)
 
 #: the coarse drives accepted: channel -> (kind, the fine motor's twin)
 DRIVES = {"torque_coarse_cmd": ("torque", "torque_fine_cmd"),
@@ -121,11 +122,7 @@ def friction_velocity_from_log(path: str | Path, start_s: float | None = None,
         kt1 = kt2 = k = None
         formula = "T1"
         if kind == "current":
-            kt1 = tbi.number("motor_coarse", "torque_constant")
-            if kt1 is None:
-                raise LogIdentificationError(f"{name}: the coarse motor's torque constant "
-                                             f"([motor_coarse] torque_constant) is unknown "
-                                             f"({tbi.source or tbi.note}): choose a testbed file")
+            kt1 = coarse_torque_constant(tbi, name)
             formula = "K_t1*i1"
         use_coupling = coupling and tbi.two_dof
         if use_coupling and not {fine_channel, "encoder_inner"} <= have:

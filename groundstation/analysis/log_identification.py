@@ -227,6 +227,16 @@ class _TestbedInfo:
         return isinstance(sec, dict) and sec.get("configuration") == "2dof"
 
 
+def coarse_torque_constant(tbi: _TestbedInfo, name: str) -> float:
+    """K_t1 in in-oz/A from the testbed, for torques from the coarse motor's current."""
+    kt1 = tbi.number("motor_coarse", "torque_constant")
+    if kt1 is None:
+        raise LogIdentificationError(f"{name}: the coarse motor's torque constant "
+                                     f"([motor_coarse] torque_constant) is unknown "
+                                     f"({tbi.source or tbi.note}): choose a testbed file")
+    return kt1
+
+
 def _testbed_info(reader: LogReader, testbed: str | Path | Testbed | None) -> _TestbedInfo:
     """From `testbed` if given; else the file the log recorded, loaded in full when it is
     still where it was and unchanged, else its recorded text for the constants only (what
@@ -463,11 +473,7 @@ def hysteresis_from_log(path: str | Path, start_s: float | None = None,
     drive = np.asarray(d[current_channel], dtype=np.float64)
     kt1 = None
     if kind == "current":
-        kt1 = tbi.number("motor_coarse", "torque_constant")
-        if kt1 is None:
-            raise LogIdentificationError(f"{name}: the coarse motor's torque constant "
-                                         f"([motor_coarse] torque_constant) is unknown "
-                                         f"({tbi.source or tbi.note}): choose a testbed file")
+        kt1 = coarse_torque_constant(tbi, name)
         torque = kt1 * drive
         formula = "K_t1*i1"
     else:
