@@ -7,6 +7,10 @@
                                           the device's table beside the design and the last upload
     groundstation params rollback [--device ...]
                                           re-activate the table active before the last upload
+    groundstation params analyze FILE [--against OTHER] [--plot FILE.png] [--freqs 1,5,14,22]
+                                          [--disturbance step:u1:2.25] [--step-mrad 0.5]
+                                          the PQ method's numbers: margins, PQ crossovers,
+                                          T_I(0), alignment, predicted saturation (no device)
 
 Each action is one `_add_<action>(actions)` function below, called from `add_parsers`;
 an action that talks to the device adds its own the same way.
@@ -33,6 +37,7 @@ def add_parsers(sub) -> argparse._SubParsersAction:
     _add_upload(actions)
     _add_show(actions)
     _add_rollback(actions)
+    _add_analyze(actions)
     return actions
 
 
@@ -202,4 +207,75 @@ def _cmd_rollback(args) -> int:
                   f"verified")
     except GroundStationError as exc:
         return fail(str(exc))
+    return EXIT_OK
+
+
+def _add_analyze(actions) -> None:
+    s = actions.add_parser(
+        "analyze", help="the PQ method's numbers for a design (no device needed)",
+        description="Margins and crossovers of the sampled loop (as validate), the PQ "
+                    "crossovers, the DC input sensitivity T_I(0), the plant/controller "
+                    "alignment at chosen frequencies (with Q = 1 for comparison), and the "
+                    "peak motor torques of the linear loop under an input disturbance and a "
+                    "reference step against the saturation limits. Exit 0: analysed; "
+                    "2: unreadable file or bad option.")
+    s.add_argument("file", help="design file, e.g. profiles/controllers/inertial_design1.toml")
+    s.add_argument("--against", default=None, metavar="OTHER",
+                   help="a second design file, analysed beside the first")
+    s.add_argument("--plot", default=None, metavar="FILE.png",
+                   help="write the PQ Bode plot with alignment contours, phi(omega), the "
+                        "input sensitivities and the time responses as a PNG")
+    s.add_argument("--freqs", default="1,5,14,22", metavar="HZ,HZ,...",
+                   help="frequencies (Hz) for the alignment table (default 1,5,14,22)")
+    s.add_argument("--disturbance", default=None, metavar="SPEC",
+                   help="input disturbance: step:u1|u2:IN_OZ or sine:u1|u2:IN_OZ:HZ "
+                        "(default: a step of the testbed's Coulomb friction torque into u1)")
+    s.add_argument("--step-mrad", type=float, default=0.5,
+                   help="reference step for the step response, mrad (default 0.5)")
+    s.add_argument("--duration", type=float, default=0.5,
+                   help="length of the time responses, s (default 0.5)")
+    s.add_argument("--no-gyro", action="store_true",
+                   help="inertial designs: leave the gyro's dynamics and delay out of G")
+    s.set_defaults(func=_cmd_analyze)
+
+
+def _cmd_analyze(args) -> int:
+    from .params.design import load_design
+    from .params.pq_report import summarize, summary_lines
+    from .params.pq_response import DisturbanceError, parse_disturbance
+
+    try:
+        freqs = [float(x) for x in args.freqs.split(",") if x.strip()]
+    except ValueError:
+        return fail(f"--freqs {args.freqs!r}: give frequencies in Hz separated by commas",
+                    EXIT_UNREADABLE)
+    if not freqs or not all(0 < f < float("inf") for f in freqs):
+        return fail(f"--freqs {args.freqs!r}: give frequencies > 0 Hz", EXIT_UNREADABLE)
+    if not (args.duration > 0 and 0 < abs(args.step_mrad) < float("inf")):
+        return fail("--duration must be > 0 s and --step-mrad finite and not 0", EXIT_UNREADABLE)
+    try:
+        disturbance = parse_disturbance(args.disturbance) if args.disturbance else None
+    except DisturbanceError as exc:
+        return fail(f"--disturbance: {exc}", EXIT_UNREADABLE)
+    summaries = []
+    for path in [args.file] + ([args.against] if args.against else []):
+        try:
+            design = load_design(path)
+            summaries.append(summarize(design, freqs, disturbance, args.step_mrad * 1e-3,
+                                       args.duration, sensor=not args.no_gyro,
+                                       dictionary=load_dictionary_for(args)))
+        except GroundStationError as exc:
+            text = str(exc)
+            return fail(text if text.startswith(str(path)) else f"{path}: {text}", EXIT_UNREADABLE)
+    for line in summary_lines(summaries):
+        print(line)
+    if args.plot:
+        from .params.pq_plot import write_figure
+
+        try:
+            out = write_figure(summaries, args.plot)
+        except OSError as exc:
+            return fail(f"--plot {args.plot}: cannot write the figure ({exc.strerror or exc})",
+                        EXIT_UNREADABLE)
+        print(f"figure:   {out}")
     return EXIT_OK
