@@ -14,6 +14,7 @@ from groundstation.scripting import ScriptError
 from groundstation.station.start_state import StartCriteria
 
 ROOT = Path(__file__).resolve().parent.parent
+DEG = 3.141592653589793 / 180
 INERTIAL = ROOT / "profiles/testbeds/inertial_2dof.toml"
 RELATIVE = ROOT / "profiles/testbeds/relative_2dof.toml"
 
@@ -57,6 +58,23 @@ def test_the_los_off_the_autocollimator_is_refused_with_its_reading(tmp_path):
         with pytest.raises(ScriptError, match=r"out of range: the autocollimator reads 5\.760 mrad, "
                                               r"beyond 5\.18 mrad"):
             tb.settle(max_seconds=3.0)
+
+
+def test_recentring_brings_the_los_back_onto_the_autocollimator_and_says_so_in_the_log(tmp_path):
+    recentre = ROOT / "profiles/controllers/recentre_inertial.toml"
+    with Testbed("sim", testbed=INERTIAL, fast=True, log_folder=tmp_path, history=tmp_path / "h") as tb:
+        _push_los_off_the_autocollimator(tb)
+        path = tb.start_recording("recentre")
+        state = tb.settle(max_seconds=5.0, recentre=recentre)
+        tb.stop_recording()
+        assert not tb._device.firmware.armed                  # recentred, then disarmed
+        assert "recentre_inertial.toml" in tb.history.records()[-1].source   # validated upload
+    assert abs(state["autocollimator_rad"]) < 0.9 * 0.33 * DEG and abs(state["outer_rad"]) < 0.9 * 0.33 * DEG
+    with LogReader(path) as log:
+        texts = [e.data.get("text", "") for e in log.journal("event")]
+    recentring = [t for t in texts if t.startswith("recentring with recentre_inertial.toml")]
+    assert recentring and "the autocollimator reads 5.760 mrad" in recentring[0]
+    assert any(t.startswith("start state verified:") for t in texts)
 
 
 def test_a_latched_fault_is_acknowledged_before_the_check(tmp_path):

@@ -406,10 +406,12 @@ class Settle(Action):
     max_seconds."""
 
     name = "settle"
-    optional = {"max_seconds", "hold_s", "max_motion_urad", "max_rate_mrad_s"}
+    optional = {"max_seconds", "hold_s", "max_motion_urad", "max_rate_mrad_s", "recentre",
+                "recentre_seconds"}
+    paths = {"recentre"}
 
     def check(self, c: StepCheck) -> None:
-        for key in ("max_seconds", "hold_s", "max_motion_urad", "max_rate_mrad_s"):
+        for key in ("max_seconds", "hold_s", "max_motion_urad", "max_rate_mrad_s", "recentre_seconds"):
             c.number(key, positive=True)
 
     def run(self, r: StepRun) -> None:
@@ -418,7 +420,8 @@ class Settle(Action):
         criteria = StartCriteria(hold_s=float(a.get("hold_s", 1.0)),
                                  max_motion_rad=float(a.get("max_motion_urad", 50.0)) * 1e-6,
                                  max_rate_rad_s=float(a.get("max_rate_mrad_s", 1.0)) * 1e-3)
-        r.tb.settle(float(a.get("max_seconds", 30.0)), criteria, progress=r.progress)
+        r.tb.settle(float(a.get("max_seconds", 30.0)), criteria, progress=r.progress,
+                    recentre=a.get("recentre"), recentre_seconds=float(a.get("recentre_seconds", 20.0)))
 
 
 @register
