@@ -96,12 +96,13 @@ class LoopSystem:
         return float(np.max(np.abs(np.linalg.eigvals(self.M))))
 
 
-def loop_system(design: ControllerDesign, lm=None) -> LoopSystem:
+def loop_system(design: ControllerDesign, lm=None, dictionary=None) -> LoopSystem:
     """The design's sampled closed loop (lm: a loop_response.LoopModel, default the
-    design's own table) with inputs [r, d1, d2] and outputs [y, u1, u2]."""
+    design's own table over `dictionary`'s defaults) with inputs [r, d1, d2] and outputs
+    [y, u1, u2]."""
     from .loop_response import loop_model
 
-    lm = lm if lm is not None else loop_model(design)
+    lm = lm if lm is not None else loop_model(design, dictionary=dictionary)
     loop = lm.loop
     M, m = loop.closed_loop(lm.c0, lm.c1, lm.c2)
     n, N = loop.Ad.shape[0], M.shape[0]
@@ -126,15 +127,15 @@ def loop_system(design: ControllerDesign, lm=None) -> LoopSystem:
 
 
 def simulate(system: LoopSystem, w: np.ndarray) -> np.ndarray:
-    """Outputs (len(w), 3) for the inputs w (len(w), 3), from rest."""
+    """Outputs (len(w), 3, m) for m input sequences w (len(w), 3, m) at once, from rest."""
     M, B, C, D = system.M, system.B, system.C, system.D
-    x = np.zeros(M.shape[0])
-    states = np.empty((len(w), M.shape[0]))
-    Bw = w @ B.T
+    x = np.zeros((M.shape[0], w.shape[2]))
+    states = np.empty((len(w), M.shape[0], w.shape[2]))
+    Bw = np.einsum("ni,kim->knm", B, w)
     for k in range(len(w)):
         states[k] = x
         x = M @ x + Bw[k]
-    return states @ C.T + w @ D.T
+    return np.einsum("on,knm->kom", C, states) + np.einsum("oi,kim->kom", D, w)
 
 
 @dataclass(frozen=True, eq=False)
@@ -192,18 +193,17 @@ class LinearResponses:
 
 def linear_responses(design: ControllerDesign, disturbance: Disturbance | None = None,
                      step_rad: float = 0.5e-3, duration_s: float = DEFAULT_DURATION_S,
-                     lm=None) -> LinearResponses:
+                     lm=None, dictionary=None) -> LinearResponses:
     """The response to `disturbance` (default friction_disturbance) and to a reference
-    step of step_rad, each over duration_s from rest."""
-    system = loop_system(design, lm)
+    step of step_rad, each over duration_s from rest (both in one pass)."""
+    system = loop_system(design, lm, dictionary)
     dist = disturbance or friction_disturbance(design.testbed)
     t = np.arange(int(round(duration_s * system.rate_hz))) / system.rate_hz
-    w = np.zeros((len(t), 3))
-    w[:, 1 + dist.input] = dist.samples(t)
-    out_d = simulate(system, w)
-    w = np.zeros((len(t), 3))
-    w[:, 0] = step_rad
-    out_r = simulate(system, w)
+    w = np.zeros((len(t), 3, 2))
+    w[:, 1 + dist.input, 0] = dist.samples(t)
+    w[:, 0, 1] = step_rad
+    out = simulate(system, w)
+    out_d, out_r = out[..., 0], out[..., 1]
     return LinearResponses(
         TimeResponse(dist.text(), t, out_d[:, 0], out_d[:, 1:]),
         TimeResponse(f"a {1e3 * step_rad:g} mrad reference step", t, out_r[:, 0], out_r[:, 1:]),
