@@ -54,3 +54,32 @@ def test_analyze_refuses_what_it_cannot_read(capsys, tmp_path):
     assert code == 2 and "--freqs" in err
     code, _, err = run(capsys, "params", "analyze", str(tmp_path / "missing.toml"))
     assert code == 2 and "missing.toml" in err
+
+
+def test_a_design_that_leaves_the_fine_motor_unused(capsys, tmp_path):
+    """c2' = 0: Q is infinite; phi is the angle between G and u1 alone, no warnings."""
+    design = tmp_path / "coarse_only.toml"
+    design.write_text(f'''
+[design]
+name = "coarse only"
+mode = "relative"
+testbed = "{(CONTROLLERS.parent / 'testbeds' / 'relative_2dof.toml').as_posix()}"
+[saturation]
+coarse_in_oz = 81.3
+fine_in_oz = 16.1
+[friction_compensation]
+enabled = false
+[c0]
+gain = 2000.0
+numerator = [[3.0], [3.0]]
+denominator = [[0], [60.0]]
+[c1]
+gain = 1.0
+[c2]
+gain = 0.0
+''')
+    png = tmp_path / "coarse.png"
+    code, out, err = run(capsys, "params", "analyze", str(design), "--plot", str(png))
+    assert code == 0, err
+    assert "c2' = 0: the fine motor is not used" in out
+    assert png.stat().st_size > 50_000

@@ -227,3 +227,12 @@ def test_disturbance_text():
     for bad in ("ramp:u1:1", "step:u3:1", "step:u1", "sine:u1:1:0", "step:u1:x"):
         with pytest.raises(DisturbanceError):
             parse_disturbance(bad)
+
+
+def test_an_unused_fine_path_is_the_limit_of_infinite_q():
+    d = design("relative_design2")
+    f = np.array([1.0, 14.0])
+    G = plant_row(d.testbed, 2j * np.pi * f, d.mode)
+    phi = alignment_deg(G, np.array([[1.0, 0.0], [1.0, 0.0]]))
+    np.testing.assert_allclose(np.cos(np.radians(phi)), np.abs(G[:, 0]) / np.linalg.norm(G, axis=1))
+    assert pq_alignment_deg(np.array([np.inf, complex(np.inf, np.nan)])).tolist() == [0.0, 0.0]

@@ -100,11 +100,15 @@ def alignment_deg(G: np.ndarray, C: np.ndarray) -> np.ndarray:
 def pq_alignment_deg(pq: np.ndarray) -> np.ndarray:
     """phi_PQ (Eq. A): the alignment for this PQ when |P| = |Q|, a lower bound otherwise.
 
-    tan phi_PQ = 2 sqrt(|PQ|) |sin(angle PQ / 2)| / |1 + PQ| (the sine from Eq. A)."""
+    tan phi_PQ = 2 sqrt(|PQ|) |sin(angle PQ / 2)| / |1 + PQ| (the sine from Eq. A).  An
+    infinite or undefined PQ (one path unused: c2' = 0) gives the limit |PQ| -> inf, 0."""
     pq = np.asarray(pq, complex)
+    finite = np.isfinite(pq)
+    pq = np.where(finite, pq, 0.0)
     m = np.abs(pq)
-    return np.degrees(np.arctan2(2 * np.sqrt(m) * np.abs(np.sin(np.angle(pq) / 2)),
-                                 np.abs(1.0 + pq)))
+    phi = np.degrees(np.arctan2(2 * np.sqrt(m) * np.abs(np.sin(np.angle(pq) / 2)),
+                                np.abs(1.0 + pq)))
+    return np.where(finite, phi, 0.0)
 
 
 def magnitude_contour_deg(pq_abs: np.ndarray) -> np.ndarray:

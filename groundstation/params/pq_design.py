@@ -96,15 +96,19 @@ class PQAnalysis:
 
     @property
     def p(self) -> np.ndarray:
-        return self.plant[:, 0] / self.plant[:, 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.plant[:, 0] / self.plant[:, 1]
 
     @property
     def q(self) -> np.ndarray:
-        return self.ratio[:, 0] / self.ratio[:, 1]
+        """c1'/c2'; infinite where c2' = 0 (a design that uses the coarse motor only)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.ratio[:, 0] / self.ratio[:, 1]
 
     @property
     def pq(self) -> np.ndarray:
-        return self.p * self.q
+        with np.errstate(invalid="ignore"):
+            return self.p * self.q
 
     @property
     def phi_deg(self) -> np.ndarray:

@@ -55,7 +55,8 @@ def write_figure(summaries: list[DesignSummary], path: str | Path) -> Path:
 
     # --- contours ---------------------------------------------------------------------
     mags = np.concatenate([_db(s.analysis.pq) for s in summaries])
-    top = max(60.0, float(np.ceil(np.nanmax(np.abs(mags[np.isfinite(mags)])) / 20) * 20))
+    mags = np.abs(mags[np.isfinite(mags)])        # none when a design leaves u2 unused
+    top = max(60.0, float(np.ceil(mags.max() / 20) * 20)) if len(mags) else 60.0
     db = np.linspace(-top, top, 801)
     filled = _bands(ax[0, 0], f, db, magnitude_contour_deg(10 ** (db / 20)))
     deg = np.linspace(-180, 180, 721)

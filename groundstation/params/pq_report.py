@@ -50,7 +50,10 @@ class DesignSummary:
 
 def pq_crossovers(a: PQAnalysis) -> tuple[tuple[float, float], ...]:
     """Where |PQ| crosses 1 on the grid, interpolated in log |PQ| over log f."""
-    log_m = np.log(np.abs(a.pq))
+    with np.errstate(divide="ignore"):
+        log_m = np.log(np.abs(a.pq))
+    if not np.all(np.isfinite(log_m)):         # a path unused (c2' = 0) or |PQ| = 0
+        return ()
     out = []
     for i in np.nonzero(np.sign(log_m[:-1]) * np.sign(log_m[1:]) < 0)[0]:
         x = log_m[i] / (log_m[i] - log_m[i + 1])
@@ -107,8 +110,12 @@ def _design_lines(s: DesignSummary) -> list[str]:
         state = ("stable" if v.max_pole_radius < 1 else
                  "UNSTABLE (validation refuses it; the linear responses below grow)")
         out.append(f"          closed-loop max |z| = {v.max_pole_radius:.6f}: {state}")
-    cross = ", ".join(f"{f:.3g} Hz (angle PQ {a:+.0f} deg)" for f, a in s.pq_crossovers) or "none"
-    out.append(f"PQ:       |PQ| = 1 at {cross}")
+    cross = ", ".join(f"{f:.3g} Hz (angle PQ {a:+.0f} deg)" for f, a in s.pq_crossovers)
+    if not np.all(np.isfinite(s.analysis.q)):
+        out.append("PQ:       c2' = 0: the fine motor is not used, Q = c1'/c2' is infinite")
+    else:
+        out.append(f"PQ:       |PQ| = 1 at {cross}" if cross else
+                   "PQ:       |PQ| does not cross 1 on the grid (0.1 Hz to Nyquist)")
     out.append(f"T_I(0):   {s.dc.text()}  (rows u1, u2; columns d1, d2: from the input "
                f"disturbance d_j to the torque u_i, exact limit s -> 0)")
     return out
