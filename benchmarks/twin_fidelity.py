@@ -69,6 +69,14 @@ def make_engine(design_name: str, testbed, params: list[str], seed: int):
         k: v for k, v in table_values(load_design(CONTROLLERS / "inertial_design1.toml"), dictionary=d).items()}
     for p in params:
         k, v = p.split("=", 1)
+        if k == "friction_comp_table":          # a slope-table CSV for the compensator
+            from groundstation.sim import friction as fr
+            x, y = fr.load_slope_table(Path(v))
+            rows = len(values["friction_comp_table_x"])
+            values["friction_comp_table_points"] = len(x)
+            values["friction_comp_table_x"] = list(x) + [2.0] * (rows - len(x))
+            values["friction_comp_table_slope"] = list(y) + [0.0] * (rows - len(x))
+            continue
         values[k] = _value(v)
     eng = Engine(testbed, values, seed=seed, control_rate_hz=RATE)
     eng.fw[core.FW_COMP_ON] = float(values["friction_comp_enabled"])
