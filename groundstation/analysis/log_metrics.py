@@ -8,6 +8,9 @@ integration period of samples for the windowed smear, the unfinished Welch segme
 energy sums and saturation counts - so an hour-long log (4.32 M frames) is never in
 memory at once and the result equals the in-memory functions on the same data.
 
+`metrics_from_columns(columns, ...)` runs the same accumulators on columns already in
+memory (the GUI's live window), as one chunk: the same frames give the same figures.
+
 The window is `start_s`..`stop_s` seconds of device time from the log's start
 (inclusive, None: open end).  The testbed constants (the autocollimator's calibrated
 range, the motor resistances) come from the testbed file recorded in the log, or from
@@ -27,7 +30,7 @@ import math
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
@@ -151,6 +154,14 @@ class LogMetrics:
     energy: ControlEnergy | None = None
     spectrum: Spectrum | None = None
     notes: tuple[str, ...] = field(default_factory=tuple)
+    #: what the figures were computed from when it is no log file (metrics_from_columns:
+    #: e.g. "live window (last 30.0 s)"); '' for a log
+    source: str = ""
+
+    @property
+    def label(self) -> str:
+        """The name a table or a plot shows: the log file's name, or the source."""
+        return self.source or self.path.name
 
     @property
     def missing_metrics(self) -> tuple[str, ...]:
@@ -159,7 +170,7 @@ class LogMetrics:
         return tuple(m for m in self.metrics if have[m] is None)
 
     def text(self) -> str:
-        lines = [f"{self.path.name}: {self.window_from_s:.3f}..{self.window_to_s:.3f} s, "
+        lines = [f"{self.label}: {self.window_from_s:.3f}..{self.window_to_s:.3f} s, "
                  f"{self.frames} frames" + (f", {self.missing_frames} missing" if self.missing_frames else "")]
         if self.jitter is not None:
             lines.append("  " + self.jitter.text())
@@ -183,7 +194,7 @@ class LogMetrics:
             return None if v is None else v * 100.0
 
         return {
-            "log": self.path.name, "test_name": self.test_name, "from_s": self.window_from_s,
+            "log": self.label, "test_name": self.test_name, "from_s": self.window_from_s,
             "to_s": self.window_to_s, "frames": self.frames, "missing_frames": self.missing_frames,
             "sensor": self.sensor,
             "samples_used": j.samples_used if j else None,
@@ -208,6 +219,101 @@ class LogMetrics:
         }
 
 
+# ---------------------------------------------------------------------- one window's sums
+def _exclusion_rule(sensor: str, figures: TestbedFigures, bits: int,
+                    notes: list[str]) -> tuple[float | None, str]:
+    """(calibrated range or None, the exclusion rule in words) of the scored sensor;
+    `bits`: its raw count's width (0: unknown).  Notes an unknown autocollimator range."""
+    # a count at either end of its wire type is a clipped value, not a measurement
+    rail = ((f" or at the {bits}-bit A/D rail" if sensor == "autocollimator"
+             else f" or at the limit of its {bits}-bit count") if bits else "")
+    if sensor != "autocollimator":
+        return None, rail.removeprefix(" or ") if rail else ""
+    range_rad = figures.autocollimator_range_rad
+    if range_rad is None:
+        notes.append("the autocollimator's calibrated range is unknown (the log records no "
+                     "testbed file with [sensors] autocollimator_range): only samples at "
+                     "the A/D rail are excluded; give --testbed FILE for the range")
+        return None, "at the A/D rail" if bits else ""
+    return range_rad, (f"|angle| >= {range_rad * 1e3:.4g} mrad (calibrated range "
+                       f"{range_rad / DEG:g} deg, {figures.source}){rail}")
+
+
+def _check_resistances(figures: TestbedFigures, where: object) -> None:
+    if figures.resistance_coarse_ohm is None or figures.resistance_fine_ohm is None:
+        known = figures.source or "the log records no testbed file"
+        raise AnalysisError(f"{where}: the motor resistances ([motor_coarse] / [motor_fine] "
+                            f"resistance) are unknown ({known}): give --testbed FILE")
+
+
+class _WindowSums:
+    """One window's running figures: missing and stalled frames, the scored sensor's
+    jitter and Welch sums, the energy sums.  analyze_log feeds it a chunk at a time,
+    metrics_from_columns once."""
+
+    def __init__(self, wanted: tuple[str, ...], rate: float, frames: int,
+                 integration_period_s: float, psd_segment_s: float, figures: TestbedFigures,
+                 range_rad: float | None):
+        self.range_rad = range_rad
+        self.jit = JitterAccumulator(rate, integration_period_s) if "jitter" in wanted else None
+        self.welch = (WelchAccumulator(rate, segment_samples(rate, psd_segment_s, frames))
+                      if "psd" in wanted else None)
+        self.energy = (EnergyAccumulator(rate, figures.resistance_coarse_ohm, figures.resistance_fine_ohm)
+                       if "energy" in wanted else None)
+        self.frames = self.missing = self.stalled = 0
+        self.last_tick: int | None = None
+
+    def feed(self, ticks, angle=None, counts=None, currents=None, saturation=None) -> None:
+        """The next piece: its ticks, the scored angle (None: not scoring) and counts
+        (None: unknown), the currents and saturation bits (None: none)."""
+        gap, m, s = frame_steps(ticks, self.last_tick)
+        self.missing += m
+        self.stalled += s
+        self.last_tick = int(ticks[-1])
+        self.frames += len(ticks)
+        if angle is not None:
+            ok = sensor_valid(angle, range_rad=self.range_rad, raw_counts=counts)
+            if self.jit is not None:
+                self.jit.feed(angle, ok, gap)
+            if self.welch is not None:
+                self.welch.feed(angle, ok, gap)
+        if self.energy is not None:
+            self.energy.feed(*currents, *(saturation if saturation is not None else (None, None)))
+
+    def finish(self, sensor: str, rule: str, setup: str, notes: list[str]):
+        """(jitter, energy, spectrum); what the data do not allow (every sample excluded,
+        no stretch long enough for a PSD segment) is left out, the reason in `notes`."""
+        if self.stalled:
+            notes.append(f"{self.stalled} frame(s) did not advance the device tick (repeated or "
+                         f"out of order): the filters restart there")
+        jit, welch = self.jit, self.welch
+        jitter = spectrum = None
+        if jit is not None and jit.n and jit.lowest == jit.highest:
+            if setup == "relative" and sensor in LOS_SENSORS:
+                # the relative set-up has no IMU or mirror: the channel is a placeholder, and
+                # its constant is nothing measured - not a perfect line of sight
+                notes.append(f"no jitter or PSD: the {sensor} reads one constant value "
+                             f"({jit.lowest:.6g} rad) over all {jit.n} samples and the testbed is "
+                             f"the relative set-up, which has no autocollimator or IMU: --sensor "
+                             f"encoder_inner")
+                jit = welch = None
+            else:
+                notes.append(f"the {sensor} reads one constant value over all {jit.n} samples: "
+                             f"any motion was below its resolution")
+        if jit is not None:
+            try:
+                jitter = jit.result(sensor, missing_frames=self.missing, exclusion_rule=rule)
+            except AnalysisError as exc:
+                notes.append(f"no jitter: {exc}")
+        if welch is not None:
+            try:
+                spectrum = welch.result()
+            except AnalysisError as exc:
+                notes.append(f"no PSD: {exc} (--psd-segment S, psd_segment_s=S)")
+        energy = self.energy.result(self.missing) if self.energy is not None else None
+        return jitter, energy, spectrum
+
+
 # ---------------------------------------------------------------------- the adapter
 def _metrics(metrics: Iterable[str]) -> tuple[str, ...]:
     wanted = tuple(dict.fromkeys(metrics))
@@ -216,6 +322,11 @@ def _metrics(metrics: Iterable[str]) -> tuple[str, ...]:
         raise AnalysisError(f"unknown metric(s) {', '.join(map(repr, bad))}; choose from "
                             f"{', '.join(METRICS)}" if bad else "no metric asked for")
     return wanted
+
+
+def _check_sensor(sensor: str) -> None:
+    if sensor not in SENSORS:
+        raise AnalysisError(f"unknown sensor {sensor!r}; choose from {', '.join(SENSORS)}")
 
 
 def analyze_log(path: str | Path, *, metrics: Iterable[str] = METRICS, start_s: float | None = None,
@@ -234,8 +345,7 @@ def analyze_log(path: str | Path, *, metrics: Iterable[str] = METRICS, start_s: 
     a channel or testbed constant is missing, the window is empty, or every sample of
     the scored sensor is excluded (AnalysisError)."""
     wanted = _metrics(metrics)
-    if sensor not in SENSORS:
-        raise AnalysisError(f"unknown sensor {sensor!r}; choose from {', '.join(SENSORS)}")
+    _check_sensor(sensor)
     if chunk_rows < 1:
         raise AnalysisError(f"chunk_rows must be >= 1, not {chunk_rows}")
     with LogReader(path) as r:
@@ -270,31 +380,14 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
         angle_from_raw = ch.has_raw and convertible(ch.conversion) and f"raw/{sensor}" in chans
         columns.append(f"raw/{sensor}" if angle_from_raw else sensor)
         bits = np.dtype(chans[f"raw/{sensor}"].dtype).itemsize * 8 if angle_from_raw else 0
-        # a count at either end of its wire type is a clipped value, not a measurement
-        rail = (f" or at the {bits}-bit A/D rail" if sensor == "autocollimator"
-                else f" or at the limit of its {bits}-bit count") if angle_from_raw else ""
-        if sensor == "autocollimator":
-            range_rad = figures.autocollimator_range_rad
-            if range_rad is None:
-                notes.append("the autocollimator's calibrated range is unknown (the log records no "
-                             "testbed file with [sensors] autocollimator_range): only samples at "
-                             "the A/D rail are excluded; give --testbed FILE for the range")
-                rule = "at the A/D rail" if angle_from_raw else ""
-            else:
-                rule = (f"|angle| >= {range_rad * 1e3:.4g} mrad (calibrated range "
-                        f"{range_rad / DEG:g} deg, {figures.source}){rail}")
-        else:
-            rule = rail.removeprefix(" or ") if rail else ""
+        range_rad, rule = _exclusion_rule(sensor, figures, bits, notes)
     sat_bits: tuple[str, ...] = ()
     if "energy" in wanted:
         lacking = [c for c in CURRENTS if c not in chans]
         if lacking:
             raise AnalysisError(f"{r.path}: the log has no {PACKET} channel(s) {', '.join(lacking)}: "
                                 f"no control energy (use --metrics without energy)")
-        if figures.resistance_coarse_ohm is None or figures.resistance_fine_ohm is None:
-            where = figures.source or "the log records no testbed file"
-            raise AnalysisError(f"{r.path}: the motor resistances ([motor_coarse] / [motor_fine] "
-                                f"resistance) are unknown ({where}): give --testbed FILE")
+        _check_resistances(figures, r.path)
         columns += list(CURRENTS)
         if all(b in chans for b in SATURATION_BITS):
             sat_bits = SATURATION_BITS
@@ -306,83 +399,104 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
     if i1 <= i0:
         raise AnalysisError(f"{r.path}: no {PACKET} frames in the window "
                             f"{r.describe_range(PACKET, start_s, stop_s, relative=True)}")
-    jit = JitterAccumulator(rate, integration_period_s) if "jitter" in wanted else None
-    welch = None
-    if "psd" in wanted:
-        welch = WelchAccumulator(rate, segment_samples(rate, psd_segment_s, i1 - i0))
-    energy = (EnergyAccumulator(rate, figures.resistance_coarse_ohm, figures.resistance_fine_ohm)
-              if "energy" in wanted else None)
+    sums = _WindowSums(wanted, rate, i1 - i0, integration_period_s, psd_segment_s, figures,
+                       range_rad)
     origin = r.origin("device")
-    frames = missing = stalled = 0
-    last_tick = None
     a = i0
     while a < i1:
         d = r.read_rows(PACKET, columns, a, min(i1, a + chunk_rows), with_time=False)
         ticks = d["tick"]
         if not len(ticks):           # a live log shorter than its index said: stop there
             break
-        gap, m, s = frame_steps(ticks, last_tick)
-        missing += m
-        stalled += s
-        last_tick = int(ticks[-1])
-        frames += len(ticks)
-        a += len(ticks)
+        angle = counts = None
         if scoring:
             if angle_from_raw:
                 counts = d[f"raw/{sensor}"]
                 angle = to_engineering(counts, chans[sensor].conversion)
             else:
-                counts, angle = None, d[sensor]
-            ok = sensor_valid(angle, range_rad=range_rad, raw_counts=counts)
-            if jit is not None:
-                jit.feed(angle, ok, gap)
-            if welch is not None:
-                welch.feed(angle, ok, gap)
-        if energy is not None:
-            energy.feed(d[CURRENTS[0]], d[CURRENTS[1]],
-                        d[sat_bits[0]] if sat_bits else None, d[sat_bits[1]] if sat_bits else None)
+                angle = d[sensor]
+        sums.feed(ticks, angle, counts,
+                  (d[CURRENTS[0]], d[CURRENTS[1]]) if "energy" in wanted else None,
+                  (d[sat_bits[0]], d[sat_bits[1]]) if sat_bits else None)
+        a += len(ticks)
         if on_progress is not None:
-            on_progress(frames, i1 - i0)
+            on_progress(sums.frames, i1 - i0)
     # the window's ends in device time: two values, not a column
     ends = r.read_rows(PACKET, ["device_time"], i0, i0 + 1, with_time=False)["device_time"]
     first_t = float(ends[0])
-    last_t = float(r.read_rows(PACKET, ["device_time"], i0 + frames - 1, i0 + frames,
+    last_t = float(r.read_rows(PACKET, ["device_time"], i0 + sums.frames - 1, i0 + sums.frames,
                                with_time=False)["device_time"][0])
-    if stalled:
-        notes.append(f"{stalled} frame(s) did not advance the device tick (repeated or out of "
-                     f"order): the filters restart there")
-    # what the data do not allow (every sample excluded, no stretch long enough for a PSD
-    # segment) leaves that figure out with the reason; the others still stand
-    jitter = spectrum = None
-    if jit is not None and jit.n and jit.lowest == jit.highest:
-        if figures.setup == "relative" and sensor in LOS_SENSORS:
-            # the relative set-up has no IMU or mirror: the channel is a placeholder, and
-            # its constant is nothing measured - not a perfect line of sight
-            notes.append(f"no jitter or PSD: the {sensor} reads one constant value "
-                         f"({jit.lowest:.6g} rad) over all {jit.n} samples and the testbed is the "
-                         f"relative set-up, which has no autocollimator or IMU: --sensor encoder_inner")
-            jit = welch = None
-        else:
-            notes.append(f"the {sensor} reads one constant value over all {jit.n} samples: any "
-                         f"motion was below its resolution")
-    if jit is not None:
-        try:
-            jitter = jit.result(sensor, missing_frames=missing, exclusion_rule=rule)
-        except AnalysisError as exc:
-            notes.append(f"no jitter: {exc}")
-    if welch is not None:
-        try:
-            spectrum = welch.result()
-        except AnalysisError as exc:
-            notes.append(f"no PSD: {exc} (--psd-segment S, psd_segment_s=S)")
+    jitter, energy, spectrum = sums.finish(sensor, rule, figures.setup, notes)
     return LogMetrics(
         path=r.path, test_name=str(r.attrs.get("test_name", "")),
-        window_from_s=first_t - origin, window_to_s=last_t - origin, frames=frames,
-        missing_frames=missing, stalled_frames=stalled, rate_hz=rate, sensor=sensor if scoring else "",
-        metrics=wanted, testbed_source=figures.source, jitter=jitter,
-        energy=energy.result(missing) if energy else None, spectrum=spectrum, notes=tuple(notes))
+        window_from_s=first_t - origin, window_to_s=last_t - origin, frames=sums.frames,
+        missing_frames=sums.missing, stalled_frames=sums.stalled, rate_hz=rate,
+        sensor=sensor if scoring else "", metrics=wanted, testbed_source=figures.source,
+        jitter=jitter, energy=energy, spectrum=spectrum, notes=tuple(notes))
+
+
+# ---------------------------------------------------------------------- columns in memory
+def metrics_from_columns(columns: Mapping[str, Any], rate_hz: float, figures: TestbedFigures, *,
+                         source: str, window_s: tuple[float, float],
+                         metrics: Iterable[str] = METRICS, sensor: str = DEFAULT_SENSOR,
+                         integration_period_s: float = DEFAULT_INTEGRATION_PERIOD_S,
+                         psd_segment_s: float = DEFAULT_SEGMENT_S,
+                         test_name: str = "") -> LogMetrics:
+    """The metrics of HIGH_RATE columns held in memory, computed as analyze_log computes
+    one chunk: "tick" (its holes are the missing frames), the scored `sensor` in rad and,
+    if known, "raw/<sensor>" (integer counts: either end of the type is the rail), for
+    energy the currents and, if known, the saturation bits.  `source` names the window
+    (the result's label; its `path` is empty: no file), `window_s` its first and last
+    frames' times.  Raises AnalysisError as analyze_log does."""
+    wanted = _metrics(metrics)
+    _check_sensor(sensor)
+    ticks = np.asarray(columns["tick"]) if "tick" in columns else np.zeros(0)
+    n = len(ticks)
+    if not n:
+        raise AnalysisError(f"{source}: no {PACKET} frames in it")
+    if any(len(v) != n for v in columns.values()):
+        raise AnalysisError(f"{source}: the columns are not all as long as 'tick' ({n})")
+    notes: list[str] = []
+    scoring = "jitter" in wanted or "psd" in wanted
+    angle = counts = None
+    range_rad, rule = None, ""
+    if scoring:
+        if sensor not in columns:
+            present = [s for s in SENSORS if s in columns]
+            raise AnalysisError(f"{source}: no {PACKET} channel '{sensor}'"
+                                + (f"; score another sensor ({' | '.join(present)})"
+                                   if present else ""))
+        angle = np.asarray(columns[sensor], dtype=float)
+        raw = columns.get(f"raw/{sensor}")
+        if raw is not None and np.asarray(raw).dtype.kind in "iu":
+            counts = np.asarray(raw)
+        range_rad, rule = _exclusion_rule(sensor, figures,
+                                          counts.dtype.itemsize * 8 if counts is not None else 0,
+                                          notes)
+    currents = saturation = None
+    if "energy" in wanted:
+        lacking = [c for c in CURRENTS if c not in columns]
+        if lacking:
+            raise AnalysisError(f"{source}: no {PACKET} channel(s) {', '.join(lacking)}: no "
+                                f"control energy")
+        _check_resistances(figures, source)
+        currents = (columns[CURRENTS[0]], columns[CURRENTS[1]])
+        if all(b in columns for b in SATURATION_BITS):
+            saturation = (columns[SATURATION_BITS[0]], columns[SATURATION_BITS[1]])
+        else:
+            notes.append(f"{source} has no saturation status bits: saturation not reported")
+    sums = _WindowSums(wanted, float(rate_hz), n, integration_period_s, psd_segment_s, figures,
+                       range_rad)
+    sums.feed(ticks, angle, counts, currents, saturation)
+    jitter, energy, spectrum = sums.finish(sensor, rule, figures.setup, notes)
+    return LogMetrics(
+        path=Path(), test_name=test_name, window_from_s=float(window_s[0]),
+        window_to_s=float(window_s[1]), frames=sums.frames, missing_frames=sums.missing,
+        stalled_frames=sums.stalled, rate_hz=float(rate_hz), sensor=sensor if scoring else "",
+        metrics=wanted, testbed_source=figures.source, jitter=jitter, energy=energy,
+        spectrum=spectrum, notes=tuple(notes), source=source)
 
 
 __all__ = ["CURRENTS", "DEFAULT_CHUNK_ROWS", "DEFAULT_SENSOR", "LogMetrics", "METRICS", "PACKET",
            "SATURATION_BITS", "SENSORS", "TICK_MODULUS", "TestbedFigures", "analyze_log", "frame_steps",
-           "figures_from_testbed"]
+           "figures_from_testbed", "metrics_from_columns"]

@@ -15,6 +15,7 @@ from ..analysis.jitter import DEFAULT_INTEGRATION_PERIOD_S
 from ..analysis.log_identification import FRF_INPUTS, FRF_OUTPUTS
 from ..analysis.log_metrics import DEFAULT_SENSOR, SENSORS
 from ..plant.testbed import TESTBEDS_DIR
+from .analysis_live import DEFAULT_LIVE_SECONDS
 
 SEGMENTS = (256, 512, 1024, 2048, 4096, 8192)
 BAD_STYLE = "color:#c62828;"
@@ -22,7 +23,8 @@ BUSY_STYLE = "color:#1565c0;"
 
 
 class OptionsBox(QGroupBox):
-    """Scored sensor, integration period, window, FRF channels and segments, testbed."""
+    """Scored sensor, integration period, window (of a log; of the live window: its last
+    seconds), FRF channels and segments, testbed."""
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__("Options", parent)
@@ -44,9 +46,18 @@ class OptionsBox(QGroupBox):
         self.window_to = QLineEdit()
         self.window_to.setPlaceholderText("end")
         for w in (self.window_from, self.window_to):
-            w.setToolTip("seconds from the log's start (empty: open end)")
+            w.setToolTip("seconds from the log's start (empty: open end); the Live window's "
+                         "span is 'live last'")
             w.setMaximumWidth(70)
             window.addWidget(w)
+        self.live_seconds = QDoubleSpinBox()
+        self.live_seconds.setRange(0.0, 86400.0)
+        self.live_seconds.setDecimals(1)
+        self.live_seconds.setValue(DEFAULT_LIVE_SECONDS)
+        self.live_seconds.setSuffix(" s")
+        self.live_seconds.setSpecialValueText("all it holds")
+        self.live_seconds.setToolTip("the Live window row analyses the last seconds of "
+                                     "telemetry the window holds (0: all it holds)")
         self.frf_input = QComboBox()
         self.frf_input.addItems(list(FRF_INPUTS))
         self.frf_output = QComboBox()
@@ -57,14 +68,16 @@ class OptionsBox(QGroupBox):
             self.segments.addItem(str(n), n)
         self.segments.setToolTip("Welch segment length in samples (resolution = rate / length)")
         self.testbed = QComboBox()
-        self.testbed.addItem("the log's", None)
+        self.testbed.addItem("the log's", None)        # live: the session's
         for path in sorted(TESTBEDS_DIR.glob("*.toml")):
             self.testbed.addItem(path.stem, str(path))
         self.testbed.setToolTip("the testbed whose model and constants are used (default: the "
-                                "file the log recorded)")
+                                "file the log recorded; for the live window, the session's "
+                                "testbed, or the replayed log's)")
         form.addRow("sensor", self.sensor)
         form.addRow("integration", self.period)
         form.addRow("window s", window)
+        form.addRow("live last", self.live_seconds)
         form.addRow("FRF input", self.frf_input)
         form.addRow("FRF output", self.frf_output)
         form.addRow("segments", self.segments)
@@ -89,6 +102,10 @@ class OptionsBox(QGroupBox):
 
     def testbed_file(self) -> str | None:
         return self.testbed.currentData()
+
+    def live_span(self) -> float | None:
+        """The live window's span in seconds (None: all the window holds)."""
+        return self.live_seconds.value() or None
 
 
 class ActionsBox(QWidget):

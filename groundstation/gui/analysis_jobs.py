@@ -5,7 +5,10 @@ Each kind of job (metrics, frf, hysteresis, step, folder) runs on a thread of it
 one at a time per kind: `start` refuses a second one of the same kind while the first
 runs (the panel's button is off meanwhile), so a result always answers the last request
 of its kind.  Metrics, FRF, hysteresis and step work through a batch of logs in turn; a
-log that fails only fails its entry (the batch lists it with the reason).  A job ends
+log that fails only fails its entry (the batch lists it with the reason).  A metrics
+batch may also hold the live window: an analysis_live.LiveSnapshot, copied from the
+window's store on the GUI thread when the job was asked for, and computed here like
+the logs (live_metrics: analyze_log's code on one chunk).  A job ends
 with exactly one signal: its result (sig_metrics_done, sig_frf_done,
 sig_hysteresis_done, sig_step_done: a Batch; sig_logs_found) or sig_failed(job,
 message) - or, when cancelled, sig_cancelled(job) and nothing after it.  The message of
@@ -37,6 +40,7 @@ from ..analysis.log_metrics import analyze_log
 from ..analysis.log_step import LogStep, step_from_log
 from ..errors import GroundStationError
 from ..logs import LogReader
+from .analysis_live import LiveSnapshot, live_metrics
 
 log = logging.getLogger(__name__)
 
@@ -53,11 +57,12 @@ class Cancelled(Exception):
 class Batch:
     """The results of the logs asked for, in their order: those computed (and the index
     of each in `requested`, which keeps a log's colour when one before it fails) and
-    those that could not be (path, reason)."""
+    those that could not be (path, reason).  A metrics batch's entries may be the live
+    window (a LiveSnapshot, named by its `.name` as a path is) instead of a path."""
 
     results: tuple[Any, ...]                  # LogMetrics, LogFrf, LogHysteresis, StepResult
-    failures: tuple[tuple[Path, str], ...]
-    requested: tuple[Path, ...]
+    failures: tuple[tuple[Path | LiveSnapshot, str], ...]
+    requested: tuple[Path | LiveSnapshot, ...]
     order: tuple[int, ...] = ()
 
     def indices(self) -> tuple[int, ...]:
@@ -163,10 +168,16 @@ class AnalysisJobs(QObject):
         self.join(timeout)
 
     # ------------------------------------------------------------------ the jobs
-    def metrics(self, paths: list[Path], **options) -> bool:
+    def metrics(self, paths: list[Path | LiveSnapshot], **options) -> bool:
         """analyze_log on each path in turn (options: sensor, integration_period_s,
-        start_s, stop_s, testbed); progress after each chunk it reads."""
-        def compute(job: _Job, path: Path, i: int, n: int):
+        start_s, stop_s, testbed); progress after each chunk it reads.  A LiveSnapshot
+        among them is the live window: live_metrics with the same sensor, period and
+        testbed (its span is its own; start_s / stop_s are the logs')."""
+        def compute(job: _Job, path, i: int, n: int):
+            if isinstance(path, LiveSnapshot):
+                return live_metrics(path, **{k: v for k, v in options.items() if k in (
+                    "sensor", "integration_period_s", "testbed")})
+
             def progress(frames: int, total: int) -> None:
                 job.check()
                 self._post(job, "sig_progress", "metrics", i, n,
@@ -204,7 +215,7 @@ class AnalysisJobs(QObject):
 
     # ------------------------------------------------------------------ plumbing
     def _batch(self, kind: str, paths, compute: Callable[[_Job, Path, int, int], Any]) -> bool:
-        paths = tuple(Path(p) for p in paths)
+        paths = tuple(p if isinstance(p, LiveSnapshot) else Path(p) for p in paths)
         done_signal = f"sig_{kind}_done"
 
         def work(job: _Job):

@@ -1,12 +1,17 @@
-"""The Analysis dock: figures of merit and identification from recorded logs.
+"""The Analysis dock: figures of merit and identification from recorded logs and from
+what the window shows.
 
 Left, the logs it acts on (analysis_runs.RunsTable): the log the window replays (added
 when the Session opens it), files chosen with File…, the logs of a folder (a campaign's)
-with Folder….  Then the options (analysis_controls.OptionsBox) - the scored sensor, the
-integration period, a window of the log (from/to in seconds from its start; empty: the
-whole log), the FRF's input and output channels, segment length and testbed - and the
-buttons (ActionsBox).  Each acts on every ticked log (when none is ticked, on the
-highlighted one), one colour per log in every plot:
+with Folder…, each recording the Session finishes (origin "recorded", not ticked), and
+the "Live window" row while a live link or a replay feeds the charts: the telemetry the
+window holds, Metrics only (analysis_live.py: a copy of the store taken here when
+Metrics is pressed, computed on the worker like a log).  Then the options
+(analysis_controls.OptionsBox) - the scored sensor, the integration period, a window of
+the log (from/to in seconds from its start; empty: the whole log), the live window's
+span (its last N seconds), the FRF's input and output channels, segment length and
+testbed - and the buttons (ActionsBox).  Each acts on every ticked log (when none is
+ticked, on the highlighted one), one colour per log in every plot:
 
 * Metrics: jitter and energy (a table row each) and the PSD and CSP of the scored sensor;
 * FRF: the frequency responses overlaid, the testbed model once, and the coherences;
@@ -35,8 +40,9 @@ from .analysis_controls import BAD_STYLE, BUSY_STYLE, ActionsBox, OptionsBox
 from ..errors import GroundStationError
 from .analysis_export import write_bytes, write_rows
 from .analysis_jobs import BATCH_JOBS, AnalysisJobs, Batch
+from .analysis_live import live_available, take_snapshot
 from .analysis_plots import FrfPlots, HysteresisPlot, SpectraPlots, StepPlots, render_png
-from .analysis_runs import RunsTable
+from .analysis_runs import LIVE, RunsTable
 from .analysis_tables import METRIC_COLUMNS, VALUE_ROLE, ResultTable
 from .dock_layout import controls_beside_plots
 
@@ -47,9 +53,12 @@ LABELS = {"metrics": "Metrics", "frf": "FRF", "hysteresis": "Hysteresis", "step"
 
 class AnalysisPanel(QWidget):
     def __init__(self, session, parent: QWidget | None = None):
-        """`session`: the window's Session (sig_source tells which log it replays)."""
+        """`session`: the window's Session (sig_source tells which log it replays, its
+        link state and source whether the Live window row is shown, its recording
+        signals what it has just recorded; `session.store` is the live window)."""
         super().__init__(parent)
         self.session = session
+        self._recording: tuple[Path, object] | None = None    # (first file, its Recorder)
         self.jobs = AnalysisJobs(self)
         self._build()
         j = self.jobs
@@ -62,9 +71,16 @@ class AnalysisPanel(QWidget):
         j.sig_failed.connect(self._on_failed)
         j.sig_cancelled.connect(self._on_cancelled)
         session.sig_source.connect(self._on_source)
+        for name, slot in (("sig_link_state", self._update_live),
+                           ("sig_recording_started", self._on_recording_started),
+                           ("sig_recording_stopped", self._on_recording_stopped)):
+            if hasattr(session, name):
+                getattr(session, name).connect(slot)
+        self.runs.itemChanged.connect(self._on_run_ticked)
         replay = getattr(session, "replay", None)
         if replay is not None:
             self.runs.add(replay.path, "replay", make_current=True)
+        self._update_live()
 
     # ------------------------------------------------------------------ layout
     def _build(self) -> None:
@@ -149,6 +165,38 @@ class AnalysisPanel(QWidget):
     def _on_source(self, kind: str, text: str) -> None:
         if kind == "replay" and text:
             self.runs.add(text, "replay", make_current=True)
+        self._update_live()
+
+    def _update_live(self, *_args) -> None:
+        """The Live window row is there while a live link or a replay feeds the charts
+        (asked of the session itself: its signals may arrive late from other threads)."""
+        self.runs.set_live(live_available(self.session))
+
+    def _on_run_ticked(self, item) -> None:
+        if (item.column() == 0 and self.runs.is_live_row(item.row())
+                and self.runs.live_checked()):
+            span = self.options.live_span()
+            what = f"the last {span:.1f} s" if span else "all"
+            self._say(f"Live window: Metrics only, of {what} the window holds (FRF, "
+                      f"Hysteresis and Step need a log: record one, it is listed when the "
+                      f"recording stops)", "")
+
+    def _on_recording_started(self, path: str) -> None:
+        self._recording = (Path(path), getattr(self.session, "recorder", None))
+
+    def _on_recording_stopped(self, _text: str) -> None:
+        """List what the session just recorded (every file, if it rolled over), not
+        ticked."""
+        started, self._recording = self._recording, None
+        if started is None:
+            return
+        first, recorder = started
+        files = list(getattr(recorder, "files", None) or [first])
+        for f in files:
+            self.runs.add(f, "recorded", checked=False)
+        if not any(self.jobs.busy(job) for job in BATCH_JOBS):
+            self._say(f"recorded: {', '.join(Path(f).name for f in files)} listed (tick it to "
+                      f"analyse)", "")
 
     def _on_logs_found(self, folder: str, paths: list) -> None:
         for p in paths:
@@ -164,13 +212,21 @@ class AnalysisPanel(QWidget):
             self._say(str(exc), BAD_STYLE)
             return None
 
-    def _targets(self, job: str) -> list[Path]:
-        """The ticked logs; when none is ticked, the highlighted one (Metrics: ticked only)."""
-        paths = self.runs.checked_paths()
-        if not paths and job != "metrics" and self.runs.currentRow() >= 0:
-            paths = [self.runs.current_path()]
+    def _targets(self, job: str) -> list:
+        """The ticked logs; when none is ticked, the highlighted one (Metrics: ticked
+        only, the Live window among them as LIVE; the others take logs only)."""
+        if job == "metrics":
+            paths = self.runs.checked_targets()
+        else:
+            paths = self.runs.checked_paths()
+            current = self.runs.current_path() if self.runs.currentRow() >= 0 else None
+            if not paths and current is not None:
+                paths = [current]
         if not paths:
-            self._say(f"{LABELS[job]}: tick at least one log", BAD_STYLE)
+            why = ("the Live window has Metrics only; tick a log (record one: it is listed "
+                   "when it stops)" if job != "metrics" and self.runs.live_checked()
+                   else "tick at least one log")
+            self._say(f"{LABELS[job]}: {why}", BAD_STYLE)
         return paths
 
     def _run(self, job: str, start) -> bool:
@@ -181,20 +237,28 @@ class AnalysisPanel(QWidget):
         started = start(paths, window, self.options.testbed_file())
         if started:
             self.actions.job_buttons()[job].setEnabled(False)
-            self._say(f"{LABELS[job]}: 0/{len(paths)} logs done…", BUSY_STYLE)
+            left_out = job != "metrics" and self.runs.live_checked()
+            self._say(f"{LABELS[job]}: 0/{len(paths)} logs done…"
+                      + (" (not the Live window: Metrics only)" if left_out else ""), BUSY_STYLE)
         else:
             self._say(f"{LABELS[job]}: still working on the last one", BAD_STYLE)
         self._update_cancel()
         return started
 
     def run_metrics(self) -> bool:
-        def start(paths, window, testbed):
+        """Metrics of the ticked logs and, when ticked, the Live window: a copy of what
+        the window holds, taken now (analysis_live.take_snapshot), computed with the logs."""
+        def start(targets, window, testbed):
+            if self.jobs.busy("metrics"):
+                return False                    # no copy of the store for nothing
             options = dict(sensor=self.sensor.currentText(),
                            integration_period_s=self.period.value(), start_s=window[0],
                            stop_s=window[1])
             if testbed:
                 options["testbed"] = testbed
-            return self.jobs.metrics(paths, **options)
+            span = self.options.live_span()
+            return self.jobs.metrics([take_snapshot(self.session, span) if t == LIVE else t
+                                      for t in targets], **options)
         return self._run("metrics", start)
 
     def run_frf(self) -> bool:

@@ -130,9 +130,9 @@ class SpectraPlots(QWidget):
             c = np.asarray(s.csp) * URAD ** 2
             ok = _positive(f, p)
             if not np.any(ok):
-                flat.append(m.path.name)
+                flat.append(m.label)
             pen = log_colour(i)
-            name = m.path.name
+            name = m.label                        # the log's name, or "live window (...)"
             self.psd_curves[name] = self.psd.plot(f[ok], p[ok], pen=pen)
             ok = _positive(f) & np.isfinite(c)
             self.csp_curves[name] = self.csp.plot(f[ok], c[ok], pen=pen, name=name)
