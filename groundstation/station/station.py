@@ -48,7 +48,8 @@ from ..link.client import DeviceClient
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
 from .recording import RecordingSlot
-from .start_state import RigLimits, StartCriteria, StartStateMonitor
+from .settling import settle_rig
+from .start_state import StartCriteria
 from .tracker import DeviceStateTracker
 
 log = logging.getLogger(__name__)
@@ -434,60 +435,14 @@ class Station:
     def settle(self, max_seconds: float = 30.0, criteria: StartCriteria | None = None,
                progress: Callable[[float], None] | None = None, *,
                recentre: str | Path | None = None, recentre_seconds: float = 20.0) -> dict[str, float]:
-        """Wait (device time) until the rig is at rest, in range and unfaulted for the
-        criteria's hold time (station/start_state.py); the measured start state, also
-        marked in the log.  A latched fault is acknowledged (DISARM) first, as after a
-        failed run.
-
-        recentre: a RELATIVE-mode design for this testbed (validated on upload, like any
-        design).  When the rig is at rest and unfaulted but out of range, it is uploaded,
-        armed on a zero reference until the range criteria hold (at most
-        `recentre_seconds`), disarmed, and the rig checked again.  The table it leaves
-        active is the recentring one: the run uploads its own next.
-
-        Raises ScriptError naming every criterion still failed, with the measured values:
-        the run must not start."""
+        """Wait (device time) until the rig is at rest, in range and unfaulted; with
+        `recentre` (a RELATIVE-mode design) bring it back first when only out of range.
+        The measured start state, marked in the log; ScriptError with every unmet
+        criterion otherwise (station/settling.py)."""
         if self.clock is None:
             raise ScriptError("settle: the session is not open")
-        if self.state.fault and not self.state.armed:
-            self.client.command("DISARM")
-        criteria = criteria or StartCriteria()
-        monitor = StartStateMonitor(RigLimits.from_testbed(self.testbed), self.d.control_rate_hz, criteria)
-        self.client.subscribe(monitor)
-        try:
-            self.clock.advance(max_seconds, progress, until=lambda: not monitor.problems())
-            problems = monitor.problems()
-            if recentre is not None and problems and all(p.kind == "range" for p in problems):
-                self._recentre(Path(recentre), monitor, problems, recentre_seconds)
-                monitor.reset()
-                self.clock.advance(max_seconds, progress, until=lambda: not monitor.problems())
-                problems = monitor.problems()
-        finally:
-            self.client.unsubscribe(monitor)
-        if problems:
-            raise ScriptError(f"settle: the rig is not ready after {max_seconds:g} s: "
-                              + "; ".join(map(str, problems)))
-        state = monitor.summary()
-        words = ", ".join(f"{k} {v:.6g}" for k, v in state.items())
-        self._note(f"start state verified: {words}")
-        return state
-
-    def _recentre(self, design: Path, monitor: StartStateMonitor, problems, seconds: float) -> None:
-        self._note(f"recentring with {design.name} (RELATIVE, zero reference): "
-                   + "; ".join(map(str, problems)))
-        self.upload_design(design)
-        self.client.command("SET_MODE", mode="RELATIVE")
-        self.client.command("ARM")                     # arming holds where the axis is ...
-        self.client.command("SET_REFERENCE", reference=0.0)   # ... then the way back to zero
-        monitor.reset()
-
-        def centred() -> bool:
-            return self.state.fault or (monitor.window() is not None and
-                                        not any(p.kind == "range" for p in monitor.problems()))
-        self.clock.advance(seconds, until=centred)
-        if self.state.fault:
-            raise ScriptError(f"settle: the device faulted while recentring with {design.name}")
-        self.client.command("DISARM")
+        return settle_rig(self, max_seconds, criteria or StartCriteria(), progress,
+                          None if recentre is None else Path(recentre), recentre_seconds)
 
     def _note(self, text: str) -> None:
         """A line for the operator, and a mark in the log when one is recording."""
