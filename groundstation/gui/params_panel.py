@@ -54,6 +54,7 @@ class ParameterPanel(QWidget):
         #: tests: the reason given for a table without a design (None: ask)
         self.override_reason: str | None = None
         self._filling = False
+        self.workbench = None                                # opened on demand
         self._build()
         session.sig_params_active.connect(self._on_active)
         session.sig_params_uploaded.connect(self._on_uploaded)
@@ -71,8 +72,11 @@ class ParameterPanel(QWidget):
         self.read_button = QPushButton("Read back")
         self.rollback_button = QPushButton("Roll back")
         self.only_diff = QCheckBox("differences only")
+        self.workbench_button = QPushButton("Workbench…")
+        self.workbench_button.setToolTip("the design workbench: PQ views, edit Q and c0, save, "
+                                         "send back here")
         for w in (self.load_button, self.validate_button, self.upload_button, self.read_button,
-                  self.rollback_button, self.only_diff):
+                  self.rollback_button, self.only_diff, self.workbench_button):
             row.addWidget(w)
         row.addStretch(1)
         lay.addLayout(row)
@@ -119,7 +123,21 @@ class ParameterPanel(QWidget):
         self.read_button.clicked.connect(self.session.params_read)
         self.rollback_button.clicked.connect(self.rollback)
         self.only_diff.toggled.connect(lambda _: self._fill())
+        self.workbench_button.clicked.connect(self.open_workbench)
         self._fill()
+
+    def open_workbench(self):
+        """The design workbench window (design_workbench.py), with this dock's 2-DOF
+        design in #1 the first time; its Send to Parameters calls load_design here."""
+        from .design_workbench import DesignWorkbench
+
+        if self.workbench is None:
+            self.workbench = DesignWorkbench(self.d, send=self.load_design, parent=self)
+            if self.design is not None and self.design.testbed.is_2dof:
+                self.workbench.open_design(0, self.design)
+        self.workbench.show()
+        self.workbench.raise_()
+        return self.workbench
 
     # ------------------------------------------------------------------ design
     def load_design_dialog(self) -> None:
