@@ -4,6 +4,7 @@
     groundstation sim [--tcp-port 5020]    run the simulated testbed
     groundstation monitor --device ADDR    connect and print live link statistics
     groundstation protocol info|check      the protocol dictionary
+    groundstation protocol export-c DIR    the firmware kit: C header and reference codec
     groundstation record --folder logs     record a session to HDF5 (see cli_logs.py)
     groundstation params validate|upload|show|rollback   controller designs (see cli_params.py)
     groundstation profile show|play FILE   command profiles (see cli_profile.py)
@@ -39,6 +40,8 @@ log = logging.getLogger("groundstation")
 
 def _cmd_protocol(args) -> int:
     d = load_dictionary(args.protocol_dir)
+    if args.action.startswith("export-"):
+        return _export_kit(args, d)
     if args.action == "check":
         print(f"protocol {d.name} {d.version}: {len(d.packets)} packets, {len(d.commands)} "
               f"commands, {len(d.parameters)} parameters - OK (hash {d.hash:08x})")
@@ -51,6 +54,21 @@ def _cmd_protocol(args) -> int:
     for c in d.commands:
         flag = " critical" if c.critical else ""
         print(f"  command 0x{c.opcode:04X} {c.name:<15}{flag}")
+    return 0
+
+
+def _export_kit(args, d) -> int:
+    """The firmware kit from the dictionary (docs/firmware.md): C header and reference
+    codec into a directory."""
+    if not args.target:
+        print(f"error: protocol {args.action} needs a directory to write to", file=sys.stderr)
+        return 2
+    from .firmware_kit import export_c
+
+    paths = export_c(d, args.target)
+    for path in paths:
+        print(f"wrote {path} ({path.stat().st_size} bytes)")
+    print(f"protocol {d.name} {d.version}, dictionary hash {d.hash:08x}")
     return 0
 
 
@@ -188,8 +206,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-v", "--verbose", action="store_true", help="log debug messages")
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("protocol", help="show or check the protocol dictionary")
-    s.add_argument("action", choices=["info", "check"])
+    s = sub.add_parser("protocol", help="show or check the protocol dictionary; export the "
+                                        "firmware kit (C header and reference codec)")
+    s.add_argument("action", choices=["info", "check", "export-c"])
+    s.add_argument("target", nargs="?", default=None,
+                   help="export-c: directory for hfb_protocol.h/.c")
     s.set_defaults(func=_cmd_protocol)
 
     s = sub.add_parser("sim", help="run the simulated testbed")

@@ -1,0 +1,106 @@
+"""The dictionary-dependent parts of the exported C source: the CRC table, the packet
+length rules, pack/unpack of every layout, and the default parameter table."""
+
+from __future__ import annotations
+
+from ..dictionary import Dictionary
+from . import c_templates as T
+from .c_header import CRC_POLY_REFLECTED, Layouts
+from .layout import Record, default_table, lower, macro
+
+
+def crc_table() -> list[int]:
+    """The 256-entry table of the reflected CRC-32 (SPEC.md 2.1), one byte at a time."""
+    table = []
+    for n in range(256):
+        c = n
+        for _ in range(8):
+            c = (c >> 1) ^ CRC_POLY_REFLECTED if c & 1 else c >> 1
+        table.append(c)
+    return table
+
+
+def _rows(values: list[str], per_line: int, indent: str = "    ") -> list[str]:
+    return [indent + ", ".join(values[i:i + per_line]) + ("," if i + per_line < len(values) else "")
+            for i in range(0, len(values), per_line)]
+
+
+def crc_block() -> str:
+    lines = ["/* CRC-32/ISO-HDLC table: polynomial 0x04C11DB7 reflected (0xEDB88320) */",
+             "static const uint32_t hfb_crc_table[256] = {"]
+    lines += _rows([f"0x{v:08X}u" for v in crc_table()], 6)
+    lines.append("};")
+    return "\n".join(lines)
+
+
+def limits_block(d: Dictionary) -> str:
+    lines = ["int hfb_payload_limits(uint8_t packet_id, uint16_t *min_length, uint16_t *max_length)",
+             "{", "    switch (packet_id) {"]
+    for p in d.packets:
+        fixed = p.fixed_payload_size
+        hi = d.max_payload if p.variable_item is not None else fixed
+        lines += [f"    case {macro('HFB_PKT', p.name, 'ID')}:  /* {p.name} */",
+                  f"        *min_length = {fixed}u;",
+                  f"        *max_length = {hi}u;",
+                  "        return 1;"]
+    lines += ["    default:", "        return 0;", "    }", "}"]
+    return "\n".join(lines)
+
+
+def pack_functions(base: str, prefix: str, rec: Record) -> str:
+    size = f"{prefix}_SIZE"
+    lines = [f"size_t {base}_pack(const {base}_t *value, uint8_t *out, size_t capacity)", "{"]
+    if rec.variable is not None:
+        var = lower(rec.variable.name)
+        lines += [f"    if (capacity < {size} || value->{var}_len > capacity - {size}) {{",
+                  "        return 0;", "    }"]
+    else:
+        lines += [f"    if (capacity < {size}) {{", "        return 0;", "    }"]
+    if rec.variable is not None:
+        # the tail first: it may already sit in `out` (memmove copies overlapping bytes)
+        lines += [f"    if (value->{var}_len > 0u) {{",
+                  f"        memmove(out + {size}, value->{var}, value->{var}_len);",
+                  "    }"]
+    for f in rec.fields:
+        name = lower(f.item.name)
+        lines.append(f"    hfb_put_{f.item.type}(out + {macro(prefix, f.item.name, 'OFFSET')}, value->{name});")
+    if rec.variable is not None:
+        lines.append(f"    return {size} + value->{var}_len;")
+    else:
+        if not rec.fields:
+            lines.append("    (void)value;")
+        lines.append(f"    return {size};")
+    lines += ["}", "",
+              f"int {base}_unpack({base}_t *value, const uint8_t *in, size_t length)", "{"]
+    check = "<" if rec.variable is not None else "!="
+    lines += [f"    if (length {check} {size}) {{", "        return -1;", "    }"]
+    for f in rec.fields:
+        name = lower(f.item.name)
+        lines.append(f"    value->{name} = hfb_get_{f.item.type}(in + {macro(prefix, f.item.name, 'OFFSET')});")
+    if rec.variable is not None:
+        lines += [f"    value->{var} = in + {size};",
+                  f"    value->{var}_len = length - {size};"]
+    elif not rec.fields:
+        lines += ["    (void)value;", "    (void)in;"]
+    lines += ["    return 0;", "}"]
+    return "\n".join(lines)
+
+
+def default_table_block(d: Dictionary) -> str:
+    data = default_table(d)
+    lines = ["/* the parameter table of all defaults (SPEC.md 11.1), big-endian as on the wire */",
+             "const uint8_t hfb_param_default_table[HFB_PARAM_TABLE_SIZE] = {"]
+    lines += _rows([f"0x{b:02X}" for b in data], 16)
+    lines.append("};")
+    return "\n".join(lines)
+
+
+def source_text(d: Dictionary, name: str) -> str:
+    parts = [T.SOURCE_TOP.substitute(name=name, protocol=d.name, version=d.version,
+                                     hash_hex=f"{d.hash:08X}").rstrip("\n"),
+             crc_block(), limits_block(d), T.CODEC.rstrip("\n"),
+             "/* ---- pack/unpack: native struct <-> big-endian bytes, offsets from the header ---- */"]
+    for base, prefix, rec, title in Layouts(d).records:
+        parts.append(f"/* {title} */\n" + pack_functions(base, prefix, rec))
+    parts.append(default_table_block(d))
+    return "\n\n".join(parts) + "\n"
