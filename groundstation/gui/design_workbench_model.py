@@ -35,7 +35,8 @@ import numpy as np
 
 from ..dictionary import Dictionary, load_dictionary
 from ..params.design_file import ControllerDesign, load_design
-from ..params.design_writer import Factored, controller_problems, factored, write_design
+from ..params.design_writer import (Factored, controller_problems, factored,
+                                    transfer_function_mismatch, write_design)
 from ..params.pq_design import (DCMatrix, PQAnalysis, analyze, dc_input_sensitivity,
                                 frequency_grid, ratio_alignment_deg)
 from ..params.pq_report import DEFAULT_FREQS_HZ, DesignSummary, pq_crossovers, summarize
@@ -113,7 +114,12 @@ class Slot:
 
     @property
     def edited(self) -> bool:
-        return self.design is not self.original
+        """Do c0, c1', c2' or the name differ from the file's?  (An edit undone by hand
+        is not an edit.)"""
+        if self.name != self.original.name:
+            return True
+        return (self.design is not self.original
+                and transfer_function_mismatch(self.design, self.original) > 1e-12)
 
     @property
     def saved(self) -> bool:

@@ -30,9 +30,10 @@ from ..params.pq import CONTOUR_LEVELS_DEG, magnitude_band_db, phase_band_deg, p
 DESIGN_COLOURS = ("#4e9bff", "#ffa62b")
 #: one colour per alignment band, 0-15 deg (green) ... 75-90 deg (red)
 BAND_COLOURS = ("#1a9850", "#91cf60", "#d9ef8b", "#fee08b", "#fc8d59", "#d73027")
-BAND_ALPHA = 80
+BAND_ALPHA = 100
 LIMIT_PEN = pg.mkPen("#ff5050", width=1)
 LIMIT_PEN_FINE = pg.mkPen("#ff5050", width=1, style=Qt.PenStyle.DashLine)
+SHOW_GRIDS = False                  # pyqtgraph grids cost ~8 ms a plot per redraw: off
 FAR_DB = 400.0                      # the outer edge of the 0-15 deg magnitude band
 LOCUS_DB = 160.0                    # the locus image spans +-this
 
@@ -90,10 +91,10 @@ class WorkbenchPlots(QWidget):
         fv = self.freq_view
         fv.addLabel(band_legend_html(), row=0, col=0, colspan=2)
         self.mag = self._plot(fv, 1, 0, "|PQ| over the magnitude contours", "|PQ|", "dB")
-        self.ti = self._plot(fv, 1, 1, "‖T_I‖ (solid) and its bound |T_O| (dashed)", "‖T_I‖", "dB")
+        self.ti = self._plot(fv, 1, 1, "‖T_I‖ (solid) and its bound |T_O| (dashed)", "‖T_I‖", "dB", grid=True)
         self.phase = self._plot(fv, 2, 0, "∠PQ over the phase contours", "∠PQ", "°")
         self.sik = self._plot(fv, 2, 1, "‖S_I K‖ (solid) and its bound |T_O|/‖G‖ (dashed)",
-                              "‖S_I K‖", "dB")
+                              "‖S_I K‖", "dB", grid=True)
         self.phi = self._plot(fv, 3, 0, "alignment φ (solid), φ_PQ (dashed), Q = 1 (dotted)",
                               "φ", "°")
         self.locus = self._plot(fv, 3, 1, "PQ locus over φ_PQ (|P| = |Q|)", "|PQ|", "dB", log_x=False)
@@ -106,10 +107,12 @@ class WorkbenchPlots(QWidget):
         self.locus.setLabel("bottom", "∠PQ (°)")
         self.legend = self.mag.addLegend(offset=(-5, 5), labelTextSize="8pt")
         tv = self.time_view
-        self.dist_u = self._plot(tv, 0, 0, "under the input disturbance", "torque", "in-oz", log_x=False)
-        self.step_u = self._plot(tv, 0, 1, "under the reference step", "torque", "in-oz", log_x=False)
-        self.dist_y = self._plot(tv, 1, 0, "y under the input disturbance", "y", "rad", log_x=False)
-        self.step_y = self._plot(tv, 1, 1, "y under the reference step", "y", "rad", log_x=False)
+        self.dist_u = self._plot(tv, 0, 0, "under the input disturbance", "torque", "in-oz", log_x=False, grid=True)
+        self.step_u = self._plot(tv, 0, 1, "under the reference step", "torque", "in-oz", log_x=False,
+                                 grid=True)
+        self.dist_y = self._plot(tv, 1, 0, "y under the input disturbance", "y", "rad", log_x=False, grid=True)
+        self.step_y = self._plot(tv, 1, 1, "y under the reference step", "y", "rad", log_x=False,
+                                 grid=True)
         for p, top in ((self.dist_y, self.dist_u), (self.step_y, self.step_u)):
             p.setXLink(top)
             p.setLabel("bottom", "t", units="s")
@@ -121,10 +124,12 @@ class WorkbenchPlots(QWidget):
         self.top_db = 60.0
 
     @staticmethod
-    def _plot(view, row: int, col: int, title: str, label: str, units: str, log_x: bool = True):
+    def _plot(view, row: int, col: int, title: str, label: str, units: str, log_x: bool = True,
+              grid: bool = False):
         p = view.addPlot(row=row, col=col, title=title)
         p.setLogMode(x=log_x, y=False)
-        p.showGrid(x=True, y=True, alpha=0.2)
+        if grid and SHOW_GRIDS:
+            p.showGrid(x=True, y=True, alpha=0.2)
         p.setLabel("left", label, units=units)
         p.setMenuEnabled(False)
         p.titleLabel.setAttr("size", "9pt")
@@ -170,7 +175,7 @@ class WorkbenchPlots(QWidget):
         self.locus.vb.disableAutoRange(axis=pg.ViewBox.XAxis)
 
     # ------------------------------------------------------------------ curves
-    def _curve(self, slot: int, key: str, plot, style=Qt.PenStyle.SolidLine, width: float = 2.0,
+    def _curve(self, slot: int, key: str, plot, style=Qt.PenStyle.SolidLine, width: float = 1.0,
                name: str | None = None) -> pg.PlotDataItem:
         curves = self.curves[slot]
         if key not in curves:
@@ -190,27 +195,37 @@ class WorkbenchPlots(QWidget):
         wrapped = np.degrees(np.angle(a.pq))
         dash, dot = Qt.PenStyle.DashLine, Qt.PenStyle.DotLine
         name = f"#{slot + 1} {fast.design.name}"
-        mag = self._curve(slot, "pq_mag", self.mag, name=name)
+        mag = self._curve(slot, "pq_mag", self.mag, width=2, name=name)
         mag.setData(f, pq_db)
         if mag.name() != name:                      # the legend says which design is which
             self.legend.removeItem(mag)
             mag.opts["name"] = name
             self.legend.addItem(mag, name)
-        self._curve(slot, "pq_phase", self.phase).setData(*broken_at_wraps(f, wrapped, wrapped))
-        self._curve(slot, "phi", self.phi).setData(f, a.phi_deg)
-        self._curve(slot, "phi_pq", self.phi, dash, 1.0).setData(f, a.phi_pq_deg)
-        self._curve(slot, "ti", self.ti).setData(f, db(lf.ti_norm))
-        self._curve(slot, "ti_bound", self.ti, dash, 1.0).setData(f, db(lf.ti_bound))
-        self._curve(slot, "sik", self.sik).setData(f, db(lf.sik_norm))
-        self._curve(slot, "sik_bound", self.sik, dash, 1.0).setData(f, db(lf.sik_bound))
-        self._curve(slot, "locus", self.locus, width=1.5).setData(*broken_at_wraps(wrapped, pq_db, wrapped))
+        self._curve(slot, "pq_phase", self.phase, width=2).setData(*broken_at_wraps(f, wrapped, wrapped))
+        self._curve(slot, "phi", self.phi, width=2).setData(f, a.phi_deg)
+        self._curve(slot, "phi_pq", self.phi, dash).setData(f, a.phi_pq_deg)
+        self._curve(slot, "ti", self.ti, width=2).setData(f, db(lf.ti_norm))
+        self._curve(slot, "ti_bound", self.ti, dash).setData(f, db(lf.ti_bound))
+        self._curve(slot, "sik", self.sik, width=2).setData(f, db(lf.sik_norm))
+        self._curve(slot, "sik_bound", self.sik, dash).setData(f, db(lf.sik_bound))
+        self._curve(slot, "locus", self.locus).setData(*broken_at_wraps(wrapped, pq_db, wrapped))
         if q_one is not None and slot == 0:
             self._q_one.setData(f, q_one)
         self.mag.setXRange(math.log10(f[0]), math.log10(f[-1]), padding=0)
         self._rescale()
 
     def _rescale(self) -> None:
-        """|PQ|'s range: +-60 dB, or more to hold every curve (in steps of 20 dB)."""
+        """|PQ|'s range: +-60 dB, or more to hold every curve (in steps of 20 dB); the
+        norms' ranges their curves' (set here: pyqtgraph's auto-range costs more)."""
+        for plot, keys in ((self.ti, ("ti", "ti_bound")), (self.sik, ("sik", "sik_bound"))):
+            ys = [c.yData for curves in self.curves for k, c in curves.items()
+                  if k in keys and c.yData is not None]
+            ys = np.concatenate(ys) if ys else np.zeros(0)
+            ys = ys[np.isfinite(ys)]
+            if len(ys):
+                lo, hi = float(ys.min()), float(ys.max())
+                pad = max(3.0, 0.05 * (hi - lo))
+                plot.setYRange(lo - pad, hi + pad, padding=0)
         worst = 0.0
         for curves in self.curves:
             c = curves.get("pq_mag")
@@ -237,10 +252,24 @@ class WorkbenchPlots(QWidget):
                              f"red: motor limits", size="9pt")
         self.step_u.setTitle(f"u1 (solid), u2 (dashed) under {r.step.label}; red: motor limits",
                              size="9pt")
+        for tag, plot, what in (("d", self.dist_y, "the input disturbance"),
+                                ("r", self.step_y, "the reference step")):
+            same = self._same_y(tag)
+            plot.setTitle(f"y under {what}" + (" - #1 and #2 alike (the same loop gain)"
+                                               if same else ""), size="9pt")
         self.set_stale(slot, stale)
         if slot == 0 or not self._limits:
             self._draw_limits(summary.design)
         self._range_torques()
+
+    def _same_y(self, tag: str) -> bool:
+        """Do both slots' y curves coincide (within 2 % of their peak), as output-
+        equivalent designs' do?  Then the title says so: one hides the other."""
+        ys = [c[f"y_{tag}"].yData for c in self.curves if f"y_{tag}" in c]
+        if len(ys) < 2 or len(ys[0]) != len(ys[1]):
+            return False
+        peak = float(np.max(np.abs(ys[0])))
+        return peak > 0 and float(np.max(np.abs(ys[0] - ys[1]))) <= 0.02 * peak
 
     def _draw_limits(self, design) -> None:
         for plot, item in self._limits:
