@@ -5,6 +5,7 @@
     groundstation monitor --device ADDR    connect and print live link statistics
     groundstation protocol info|check      the protocol dictionary
     groundstation protocol export-c DIR    the firmware kit: C header and reference codec
+    groundstation protocol export-wireshark FILE.lua   ... and a Wireshark/tshark dissector
     groundstation record --folder logs     record a session to HDF5 (see cli_logs.py)
     groundstation params validate|upload|show|rollback   controller designs (see cli_params.py)
     groundstation profile show|play FILE   command profiles (see cli_profile.py)
@@ -59,13 +60,17 @@ def _cmd_protocol(args) -> int:
 
 def _export_kit(args, d) -> int:
     """The firmware kit from the dictionary (docs/firmware.md): C header and reference
-    codec into a directory."""
+    codec into a directory, or a Wireshark Lua dissector into a file."""
     if not args.target:
-        print(f"error: protocol {args.action} needs a directory to write to", file=sys.stderr)
+        what = "a directory" if args.action == "export-c" else "a .lua file"
+        print(f"error: protocol {args.action} needs {what} to write to", file=sys.stderr)
         return 2
-    from .firmware_kit import export_c
+    from .firmware_kit import export_c, export_wireshark
 
-    paths = export_c(d, args.target)
+    if args.action == "export-c":
+        paths = export_c(d, args.target)
+    else:
+        paths = [export_wireshark(d, args.target, port=args.port)]
     for path in paths:
         print(f"wrote {path} ({path.stat().st_size} bytes)")
     print(f"protocol {d.name} {d.version}, dictionary hash {d.hash:08x}")
@@ -207,10 +212,14 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("protocol", help="show or check the protocol dictionary; export the "
-                                        "firmware kit (C header and reference codec)")
-    s.add_argument("action", choices=["info", "check", "export-c"])
+                                        "firmware kit (C header and codec, Wireshark dissector)")
+    s.add_argument("action", choices=["info", "check", "export-c", "export-wireshark"])
     s.add_argument("target", nargs="?", default=None,
-                   help="export-c: directory for hfb_protocol.h/.c")
+                   help="export-c: directory for hfb_protocol.h/.c; export-wireshark: the .lua file")
+    s.add_argument("--port", type=int, default=5020,
+                   help="export-wireshark: the device's TCP command port, also the UDP port its "
+                        "telemetry comes from (default 5020, the simulator's; a Wireshark "
+                        "preference changes it)")
     s.set_defaults(func=_cmd_protocol)
 
     s = sub.add_parser("sim", help="run the simulated testbed")
