@@ -221,3 +221,21 @@ def test_the_model_refuses_what_load_design_would(dictionary):
     with pytest.raises(DesignError, match="output-equivalent"):
         m.edit(0, "c0", "gain", None, "2")
     assert m.reset(0).design is m.slot(0).original
+
+
+def test_a_worker_process_that_dies_is_replaced_by_a_thread(qtbot, make_workbench):
+    import os
+    import signal
+
+    wb = make_workbench()
+    assert wb.open_design(0, CONTROLLERS / "relative_design2.toml")
+    fresh(qtbot, wb)
+    assert wb.jobs.uses_process
+    pids = list(wb.jobs._pool._processes)            # the one process this test started
+    assert len(pids) == 1
+    os.kill(pids[0], signal.SIGKILL)
+    wb.editor.set_value("Q", "gain", None, "3000")
+    fresh(qtbot, wb)                                 # answered all the same, on a thread
+    assert not wb.jobs.uses_process
+    assert wb.value("verdict", 0).startswith(("OK", "MARGINAL", "REFUSED"))
+    assert "3000" in wb.editor.table.item(wb.editor.row_of("Q", "gain"), 2).text()

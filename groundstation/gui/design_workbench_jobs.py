@@ -23,40 +23,15 @@ from __future__ import annotations
 import logging
 import multiprocessing
 import threading
-import time
 from concurrent.futures import Future, ProcessPoolExecutor
 from concurrent.futures.process import BrokenProcessPool
 from typing import Any
 
 from PySide6.QtCore import QCoreApplication, QObject, Qt, Signal
 
-from ..errors import GroundStationError
-from .design_workbench_model import slow_views
+from . import design_workbench_worker as worker
 
 log = logging.getLogger(__name__)
-
-_worker_dictionary = None                # in the worker process: the GUI's dictionary
-
-
-def _start_worker(dictionary) -> None:
-    global _worker_dictionary
-    _worker_dictionary = dictionary
-
-
-def _ready() -> bool:
-    return True
-
-
-def _compute(design, dictionary=None) -> tuple[Any, str, float]:
-    """(result, message, seconds) of one job; runs in the worker process or thread."""
-    t0 = time.perf_counter()
-    try:
-        return slow_views(design, dictionary or _worker_dictionary), "", time.perf_counter() - t0
-    except GroundStationError as exc:
-        return None, str(exc), time.perf_counter() - t0
-    except Exception as exc:                 # a bug: logged, reported in one line
-        log.exception("workbench: the slow views failed")
-        return None, f"internal error: {type(exc).__name__}: {exc}", time.perf_counter() - t0
 
 
 class SlowJobs(QObject):
@@ -79,8 +54,8 @@ class SlowJobs(QObject):
         if processes:
             try:
                 self._pool = ProcessPoolExecutor(1, mp_context=multiprocessing.get_context("spawn"),
-                                                 initializer=_start_worker, initargs=(dictionary,))
-                self._pool.submit(_ready)            # start it (imports) before the first job
+                                                 initializer=worker.start, initargs=(dictionary,))
+                self._pool.submit(worker.ready)            # start it (imports) before the first job
             except (OSError, RuntimeError) as exc:
                 log.warning("workbench: no worker process (%s); computing on a thread", exc)
                 self._pool = None
@@ -111,7 +86,7 @@ class SlowJobs(QObject):
         self._running = True
         if self._pool is not None:
             try:
-                future = self._pool.submit(_compute, design)
+                future = self._pool.submit(worker.compute, design)
             except (BrokenProcessPool, RuntimeError) as exc:
                 self._lose_pool(exc)
             else:
@@ -122,7 +97,7 @@ class SlowJobs(QObject):
         self._thread.start()
 
     def _on_thread(self, slot: int, generation: int, design: Any) -> None:     # worker thread
-        self._emit(slot, generation, *_compute(design, self._dictionary))
+        self._emit(slot, generation, *worker.compute(design, self._dictionary))
 
     def _from_process(self, slot: int, generation: int, design: Any, future: Future) -> None:
         try:
