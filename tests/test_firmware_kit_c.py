@@ -378,7 +378,16 @@ def damaged(d, codec, frames: list[bytes], rng: random.Random) -> bytes:
 
 # ------------------------------------------------------------------ tests
 def test_byte_order_is_explicit_on_this_little_endian_host(kit, dictionary):
-    facts = dict(line.split(" ", 1) for line in run(kit["default"], "selftest", b"").splitlines())
+    lines = run(kit["default"], "selftest", b"").splitlines()
+    facts = dict(line.split(" ", 1) for line in lines if not line.startswith("command "))
+    commands = [line.split()[1:] for line in lines if line.startswith("command ")]
+    want = []
+    for c in sorted(dictionary.commands, key=lambda c: c.opcode):
+        fixed = [sum(C_TYPES[i.type][1] for i in items if not i.is_variable) for items in (c.args, c.reply)]
+        var = [int(bool(items) and items[-1].is_variable) for items in (c.args, c.reply)]
+        want.append([c.name, str(c.opcode), str(fixed[0]), str(var[0]), str(fixed[1]), str(var[1]),
+                     str(int(c.needs_session)), str(int(c.critical))])
+    assert commands == want
     assert facts["host_order"] == sys.byteorder == "little", \
         "this check proves explicit byte order only on a little-endian host"
     assert facts["put_u32"] == "12345678"               # most significant byte first
@@ -390,6 +399,11 @@ def test_byte_order_is_explicit_on_this_little_endian_host(kit, dictionary):
     assert facts["residue"] == "2144df1c"                # whole frame, CRC sent LSB first
     assert facts["refuses_short"] == "1"
     assert facts["dictionary_hash"] == f"{dictionary.hash:08x}"
+    # SPEC §3.2: 0.0389 A is 389 counts; rounding to nearest; saturation, not wrapping;
+    # the encoder example's 1 mrad is 683565 counts, as SPEC §13.1 and the codec have it
+    hr = dictionary.packet("HIGH_RATE").item_by_name["encoder_outer"]
+    assert facts["counts"].split() == ["389", "-312", "32767", "-32768", "0",
+                                       str(int(hr.to_raw(0.001))), "0", "255"]
     from groundstation.params.table import default_values, pack
 
     spec_crc = f"{zlib.crc32(pack(dictionary, default_values(dictionary))):08x}"
@@ -639,3 +653,17 @@ def test_a_change_to_the_toml_regenerates_the_header_and_its_hash(tmp_path, dict
     out = run(exe, "encode", b"pkt HIGH_RATE 1 2 mode=1 spare_counter=513\n")
     block = FrameCodec(changed).decode_frame(bytes.fromhex(out.strip()))
     assert block["spare_counter"][0] == 513 and block["mode"][0] == 1
+
+
+def test_the_example_in_the_firmware_guide_compiles(kit):
+    """docs/firmware.md sketches a controller with the kit: it must stay true to the
+    header it describes."""
+    text = (ROOT / "docs" / "firmware.md").read_text(encoding="utf-8")
+    blocks = re.findall(r"^```c\n(.*?)^```", text, re.S | re.M)
+    assert blocks, "docs/firmware.md has no C example"
+    for k, code in enumerate(blocks):
+        src = kit["dir"] / f"doc_example_{k}.c"
+        src.write_text(code)
+        compile_c([src], kit["dir"] / f"doc_example_{k}.o",
+                  ["-std=c99", "-pedantic", "-Wall", "-Wextra", "-Wconversion", "-Werror", "-c",
+                   f"-I{kit['dir']}"])

@@ -6,7 +6,7 @@ from __future__ import annotations
 from ..dictionary import Dictionary
 from . import c_templates as T
 from .c_header import CRC_POLY_REFLECTED, Layouts
-from .layout import Record, default_table, lower, macro
+from .layout import Record, default_table, lower, macro, record
 
 
 def crc_table() -> list[int]:
@@ -44,6 +44,23 @@ def limits_block(d: Dictionary) -> str:
                   f"        *max_length = {hi}u;",
                   "        return 1;"]
     lines += ["    default:", "        return 0;", "    }", "}"]
+    return "\n".join(lines)
+
+
+def commands_block(d: Dictionary) -> str:
+    lines = ["static const hfb_command_info_t hfb_commands[] = {"]
+    for c in d.commands:
+        args, reply = record(c.args), record(c.reply)
+        lines.append(f'    {{"{c.name}", {macro("HFB_CMD", c.name, "OPCODE")}, {args.fixed_size}u, '
+                     f"{int(args.variable is not None)}u, {reply.fixed_size}u, "
+                     f"{int(reply.variable is not None)}u, {int(c.needs_session)}u, {int(c.critical)}u}},")
+    lines += ["};", "",
+              "const hfb_command_info_t *hfb_command_info(uint16_t opcode)", "{",
+              "    size_t i;",
+              "    for (i = 0; i < sizeof hfb_commands / sizeof hfb_commands[0]; i++) {",
+              "        if (hfb_commands[i].opcode == opcode) {",
+              "            return &hfb_commands[i];", "        }", "    }",
+              "    return NULL;", "}"]
     return "\n".join(lines)
 
 
@@ -98,7 +115,7 @@ def default_table_block(d: Dictionary) -> str:
 def source_text(d: Dictionary, name: str) -> str:
     parts = [T.SOURCE_TOP.substitute(name=name, protocol=d.name, version=d.version,
                                      hash_hex=f"{d.hash:08X}").rstrip("\n"),
-             crc_block(), limits_block(d), T.CODEC.rstrip("\n"),
+             crc_block(), limits_block(d), commands_block(d), T.CODEC.rstrip("\n"),
              "/* ---- pack/unpack: native struct <-> big-endian bytes, offsets from the header ---- */"]
     for base, prefix, rec, title in Layouts(d).records:
         parts.append(f"/* {title} */\n" + pack_functions(base, prefix, rec))

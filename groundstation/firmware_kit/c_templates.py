@@ -159,6 +159,50 @@ static inline uint32_t hfb_get_u32le(const uint8_t *p)
 {
     return (uint32_t)p[0] | ((uint32_t)p[1] << 8) | ((uint32_t)p[2] << 16) | ((uint32_t)p[3] << 24);
 }
+
+/* ---- engineering value -> counts (SPEC.md 3.2) ---------------------------------------
+ * hfb_counts_<type>(eng, scale, offset) = round((eng - offset) / scale), to the nearest
+ * count (halves away from zero; the host accepts either way), saturated at the type's
+ * limits, never wrapped; NaN gives 0.  E.g. the HIGH_RATE encoder:
+ *     hr.encoder_outer = hfb_counts_i32(phi1, HFB_PKT_HIGH_RATE_ENCODER_OUTER_SCALE, 0.0); */
+static inline double hfb_counts_(double eng, double scale, double offset, double lo, double hi)
+{
+    double x = (eng - offset) / scale;
+    if (x != x) {
+        return 0.0;
+    }
+    if (x <= lo) {
+        return lo;
+    }
+    if (x >= hi) {
+        return hi;
+    }
+    return x < 0.0 ? -(double)(int64_t)(0.5 - x) : (double)(int64_t)(x + 0.5);
+}
+static inline int8_t hfb_counts_i8(double eng, double scale, double offset)
+{
+    return (int8_t)hfb_counts_(eng, scale, offset, -128.0, 127.0);
+}
+static inline uint8_t hfb_counts_u8(double eng, double scale, double offset)
+{
+    return (uint8_t)hfb_counts_(eng, scale, offset, 0.0, 255.0);
+}
+static inline int16_t hfb_counts_i16(double eng, double scale, double offset)
+{
+    return (int16_t)hfb_counts_(eng, scale, offset, -32768.0, 32767.0);
+}
+static inline uint16_t hfb_counts_u16(double eng, double scale, double offset)
+{
+    return (uint16_t)hfb_counts_(eng, scale, offset, 0.0, 65535.0);
+}
+static inline int32_t hfb_counts_i32(double eng, double scale, double offset)
+{
+    return (int32_t)hfb_counts_(eng, scale, offset, -2147483648.0, 2147483647.0);
+}
+static inline uint32_t hfb_counts_u32(double eng, double scale, double offset)
+{
+    return (uint32_t)hfb_counts_(eng, scale, offset, 0.0, 4294967295.0);
+}
 """
 
 API = """\
@@ -195,6 +239,23 @@ typedef struct {
 } hfb_frame_view_t;
 
 int hfb_frame_view(const uint8_t *frame, size_t length, hfb_frame_view_t *view);
+
+/* ---- commands ------------------------------------------------------------------------
+ * hfb_command_info(opcode): what commands.toml says about a command, for the generic
+ * checks of SPEC.md 6.3 (1: known opcode, 2: argument length, 3: session token); NULL
+ * for an opcode that is not in the dictionary (REJECTED UNKNOWN_COMMAND). */
+typedef struct {
+    const char *name;
+    uint16_t opcode;
+    uint16_t args_size;        /* argument bytes; with args_variable, the fixed part */
+    uint8_t args_variable;     /* 1: the last argument (str/bytes) takes the rest */
+    uint16_t reply_size;       /* reply bytes of COMPLETED; with reply_variable, the fixed part */
+    uint8_t reply_variable;
+    uint8_t needs_session;     /* 1: the session token must match */
+    uint8_t critical;          /* 1: the host asks its operator first (informative) */
+} hfb_command_info_t;
+
+const hfb_command_info_t *hfb_command_info(uint16_t opcode);
 
 /* ---- stream deframer (SPEC.md 4.1) -------------------------------------------------
  * Finds frames in a byte stream (the TCP command connection, a serial line) with the
