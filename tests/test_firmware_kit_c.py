@@ -377,6 +377,11 @@ def damaged(d, codec, frames: list[bytes], rng: random.Random) -> bytes:
 
 
 # ------------------------------------------------------------------ tests
+def test_the_system_c_compiler_is_installed():
+    """Without gcc every test here fails (the kit fixture too): this one says why first."""
+    assert Path(gcc()).exists()
+
+
 def test_byte_order_is_explicit_on_this_little_endian_host(kit, dictionary):
     lines = run(kit["default"], "selftest", b"").splitlines()
     facts = dict(line.split(" ", 1) for line in lines if not line.startswith("command "))
