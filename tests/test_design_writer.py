@@ -61,7 +61,17 @@ def test_paths_are_relative_beside_the_shipped_files(tmp_path):
     text = design_text(design, CONTROLLERS / "not_written.toml")
     assert 'testbed = "../testbeds/relative_2dof.toml"' in text
     assert 'slope_table = "../friction_slope_lut.csv"' in text
-    assert 'testbed = "/' in design_text(design, tmp_path / "x.toml")     # /tmp shares only "/"
+    # elsewhere the file names the testbed so that it loads from where it is written,
+    # wherever this checkout and the temporary folder are
+    elsewhere = tmp_path / "x.toml"
+    elsewhere.write_text(design_text(design, elsewhere))
+    assert load_design(elsewhere).testbed.path == design.testbed.path
+
+
+def test_a_path_sharing_only_the_root_is_written_absolute():
+    from groundstation.params.design_writer import _relative
+    assert _relative(Path("/srv/lab/testbeds/a.toml"), Path("/home/op/designs")) == "/srv/lab/testbeds/a.toml"
+    assert _relative(Path("/srv/lab/testbeds/a.toml"), Path("/srv/lab/designs")) == "../testbeds/a.toml"
 
 
 def test_factors_from_roots():
