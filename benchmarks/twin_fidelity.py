@@ -35,6 +35,7 @@ from groundstation.basemotion.stage import BaseStageModel  # noqa: E402
 from groundstation.basemotion.synthesis import make_profile  # noqa: E402
 from groundstation.dictionary import load_dictionary  # noqa: E402
 from groundstation.params.design import load_design, table_values  # noqa: E402
+from groundstation.params.table import default_values  # noqa: E402
 from groundstation.plant.testbed import load_testbed  # noqa: E402
 from groundstation.sim import core  # noqa: E402
 from groundstation.sim.engine import Engine  # noqa: E402
@@ -65,8 +66,8 @@ def testbed_with(path: Path, changes: list[str]):
 def make_engine(design_name: str, testbed, params: list[str], seed: int):
     d = load_dictionary()
     design = load_design(CONTROLLERS / f"{design_name}.toml") if design_name != "open_loop" else None
-    values = table_values(design, dictionary=d) if design else {
-        k: v for k, v in table_values(load_design(CONTROLLERS / "inertial_design1.toml"), dictionary=d).items()}
+    # open loop: the device's default table (never armed, so no controller runs)
+    values = table_values(design, dictionary=d) if design else dict(default_values(d))
     for p in params:
         k, v = p.split("=", 1)
         if k == "friction_comp_table":          # a slope-table CSV for the compensator

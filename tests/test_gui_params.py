@@ -19,6 +19,15 @@ def window(gui_window):
     return gui_window(20.0, confirm=("parameters",))
 
 
+def design2_with_c0_gain(tmp_path, gain: str) -> Path:
+    """Relative Design #2 with c0's gain replaced (and its testbed path made absolute)."""
+    text = (CONTROLLERS / "relative_design2.toml").read_text()
+    path = tmp_path / f"design2_c0_gain_{gain}.toml"
+    path.write_text(text.replace('"../testbeds/', f'"{CONTROLLERS.parent / "testbeds"}/')
+                    .replace("gain = 30801", f"gain = {gain}"))
+    return path
+
+
 def tree_row(panel, name):
     for i in range(panel.tree.topLevelItemCount()):
         item = panel.tree.topLevelItem(i)
@@ -76,11 +85,7 @@ def test_an_unstable_design_is_refused_and_nothing_is_sent(qtbot, window, tmp_pa
     session.connect_sim("profiles/testbeds/relative_2dof.toml")
     qtbot.waitUntil(lambda: panel.device is not None, timeout=60000)
     session.client.add_command_listener(lambda r: sent.append(r.name))
-    text = (CONTROLLERS / "relative_design2.toml").read_text()
-    bad = tmp_path / "too_much_gain.toml"
-    # the same design with its testbed path made absolute and c0's gain 1000x
-    bad.write_text(text.replace('"../testbeds/', f'"{CONTROLLERS.parent / "testbeds"}/')
-                   .replace("gain = 30801", "gain = 30801000"))
+    bad = design2_with_c0_gain(tmp_path, "30801000")      # c0's gain 1000x: unstable
     assert panel.load_design(bad)
     assert panel.report is not None and not panel.report.ok
     assert "REFUSED" in panel.result.text()
@@ -94,11 +99,7 @@ def test_a_marginal_design_is_sent_only_with_its_margins_accepted(qtbot, window,
     session.connect_sim("profiles/testbeds/relative_2dof.toml")
     qtbot.waitUntil(lambda: panel.device is not None, timeout=60000)
     session.client.add_command_listener(lambda r: sent.append(r.name))
-    text = (CONTROLLERS / "relative_design2.toml").read_text()
-    slow = tmp_path / "too_little_gain.toml"
-    # c0's gain cut to 6000: stable, phase margin about 6 deg
-    slow.write_text(text.replace('"../testbeds/', f'"{CONTROLLERS.parent / "testbeds"}/')
-                    .replace("gain = 30801", "gain = 6000"))
+    slow = design2_with_c0_gain(tmp_path, "6000")         # stable, phase margin about 6 deg
     assert panel.load_design(slow)
     assert panel.report is not None and not panel.report.ok and not panel.report.problems
     assert panel.result.text().startswith("MARGINAL: stable, but")
