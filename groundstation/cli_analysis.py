@@ -63,23 +63,16 @@ _COLUMNS = {
                ("sat fine %", "saturated_fine_pct", "{:.2f}")],
     "psd": [("PSD rms urad", "psd_rms_urad", "{:.3f}"), ("df Hz", "psd_resolution_hz", "{:.3g}")],
 }
-#: every key of a row, in the order of the CSV columns
-ROW_KEYS = ["log", "path", "test_name", "from_s", "to_s", "frames", "missing_frames", "sensor",
-            "samples_used", "samples_excluded", "segments", "integration_period_s", "mean_urad",
-            "rms_urad", "std_urad", "highpass_rms_urad", "smear_rms_urad", "energy_coarse_j",
-            "energy_fine_j", "energy_total_j", "rms_current_coarse_a", "rms_current_fine_a",
-            "saturated_coarse_pct", "saturated_fine_pct", "psd_rms_urad", "psd_resolution_hz",
-            "psd_segments",
-            "step_time_s", "step_size_urad", "step_rise_s", "step_overshoot_pct",
-            "step_settling_s", "step_steady_state_error_urad", "step_peak_effort",
-            "step_effort_channel",
-            "frf_input", "frf_output", "frf_coherent_from_hz", "frf_coherent_to_hz",
-            "frf_coherent_bins", "frf_rms_db",
-            "hyst_branches", "hyst_complete_branches", "hyst_coulomb_in_oz",
-            "hyst_turnaround_slope_in_oz_per_rad", "hyst_slope_table", "hyst_slope_table_file",
-            "fv_segments", "fv_settled_segments", "fv_speed_deg_s", "fv_torque_pos_in_oz",
-            "fv_torque_neg_in_oz", "fv_friction_in_oz", "fv_offset_in_oz", "fv_torque_formula",
-            "notes", "error"]
+
+
+def __getattr__(name: str):
+    # ROW_KEYS (every key of a row, in the order of the CSV columns) is defined beside the
+    # code that fills a row (analysis/batch_rows.py, numpy); read on first use so that
+    # parsing stays standard-library only
+    if name == "ROW_KEYS":
+        from .analysis.batch_rows import ROW_KEYS
+        return ROW_KEYS
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def _metrics(text: str) -> tuple[str, ...]:
@@ -185,6 +178,7 @@ def _cmd_analyze(args) -> int:
     if args.json:
         print(json.dumps(rows, indent=2))
     elif args.csv:
+        from .analysis.batch_rows import ROW_KEYS
         w = csv.DictWriter(sys.stdout, fieldnames=ROW_KEYS, lineterminator="\n")
         w.writeheader()
         for row in rows:
@@ -210,28 +204,11 @@ def _cmd_analyze(args) -> int:
 
 def _extras(name: str, extras: tuple[str, ...], args, testbed) -> dict:
     """{metric: result, or the error message} of the extra metrics of one log."""
-    from .analysis.log_friction_velocity import friction_velocity_from_log
-    from .analysis.log_identification import frf_from_log, hysteresis_from_log
-    from .analysis.log_step import step_from_log
-    from .errors import GroundStationError
+    from .analysis.batch_rows import extra_results
 
-    out: dict = {}
-    for metric in extras:
-        try:
-            if metric == "step":
-                out[metric] = step_from_log(name, args.start, args.stop)
-            elif metric == "frf":
-                out[metric] = frf_from_log(name, args.frf_input, args.frf_output, args.start,
-                                           args.stop, testbed=testbed,
-                                           min_coherence=MIN_COHERENCE)
-            elif metric == "friction_velocity":
-                out[metric] = friction_velocity_from_log(name, args.start, args.stop,
-                                                         testbed=testbed)
-            else:
-                out[metric] = hysteresis_from_log(name, args.start, args.stop, testbed=testbed)
-        except GroundStationError as exc:
-            out[metric] = str(exc)
-    return out
+    return extra_results(name, extras, start_s=args.start, stop_s=args.stop,
+                         frf_input=args.frf_input, frf_output=args.frf_output, testbed=testbed,
+                         min_coherence=MIN_COHERENCE)
 
 
 def _write_slope_tables(out: Path, logs: list[str], extra_results: list[dict]) -> None:
@@ -257,73 +234,10 @@ def _write_slope_tables(out: Path, logs: list[str], extra_results: list[dict]) -
             ex["hysteresis"] = f"slope table not written: {exc}"
 
 
-def _finite(v) -> float | None:
-    v = float(v)
-    return v if math.isfinite(v) else None
-
-
-def _extra_row(ex: dict) -> tuple[dict, list[str], list[str]]:
-    """(figures, notes, errors) of a log's extra metrics for its row."""
-    import numpy as np
-
-    row: dict = {}
-    notes: list[str] = []
-    errors: list[str] = []
-    for metric, res in ex.items():
-        if metric == "hysteresis_file":
-            continue
-        if isinstance(res, str):
-            errors.append(f"{metric}: {res}")
-            continue
-        notes += [f"{metric}: {n}" for n in res.notes]
-        if metric == "step":
-            s = res.metrics
-            row.update(step_time_s=res.step_time_s, step_size_urad=res.step_size * 1e6,
-                       step_rise_s=_finite(s.rise_time_s),
-                       step_overshoot_pct=_finite(s.overshoot_percent),
-                       step_settling_s=_finite(s.settling_time_s),
-                       step_steady_state_error_urad=_finite(s.steady_state_error * 1e6),
-                       step_peak_effort=_finite(s.peak_effort),
-                       step_effort_channel=res.effort_channel or "")
-        elif metric == "frf":
-            m = res.measured
-            coherent = (m.freq_hz > 0) & (np.nan_to_num(m.coherence) >= MIN_COHERENCE)
-            f = m.freq_hz[coherent]
-            c = res.comparison
-            row.update(frf_input=res.input_channel, frf_output=res.output_channel,
-                       frf_coherent_from_hz=float(f.min()) if f.size else None,
-                       frf_coherent_to_hz=float(f.max()) if f.size else None,
-                       frf_coherent_bins=int(f.size),
-                       frf_rms_db=_finite(c.rms_magnitude_ratio_db)
-                       if c is not None and c.bins_used else None)
-        elif metric == "friction_velocity":
-            row.update({f"fv_{k}": v for k, v in res.result.summary().items()},
-                       fv_torque_formula=res.torque_formula)
-        else:
-            ident = res.identification
-            slopes = np.array([b.turnaround_slope_in_oz_per_rad for b in res.loop.branches])
-            slopes = slopes[np.isfinite(slopes)]
-            row.update(hyst_branches=len(res.loop.branches),
-                       hyst_complete_branches=sum(b.complete for b in res.loop.branches),
-                       hyst_coulomb_in_oz=ident.coulomb_torque_in_oz if ident else None,
-                       hyst_turnaround_slope_in_oz_per_rad=float(np.median(slopes))
-                       if slopes.size else None,
-                       hyst_slope_table=ident is not None,
-                       hyst_slope_table_file=ex.get("hysteresis_file", ""))
-    return row, notes, errors
-
-
 def _row(name: str, m, error: str, ex: dict) -> dict:
-    if m is None:
-        row = dict.fromkeys(ROW_KEYS)
-        row.update(log=Path(name).name, path=str(name), error=error, notes="")
-    else:
-        row = {"path": str(name), **m.row()}
-    figures, notes, errors = _extra_row(ex)
-    row.update(figures)
-    row["notes"] = "; ".join(([row["notes"]] if row.get("notes") else []) + notes)
-    row["error"] = "; ".join(([row["error"]] if row.get("error") else []) + errors)
-    return {k: row.get(k) for k in ROW_KEYS}
+    from .analysis.batch_rows import log_row
+
+    return log_row(name, m, error, ex, MIN_COHERENCE)
 
 
 def _ms(v) -> str:
