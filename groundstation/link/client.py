@@ -87,6 +87,8 @@ class DeviceClient:
         self._subscribers: list[Callable[[TelemetryBlock], None]] = []
         self._link_listeners: list[Callable[[str, str], None]] = []
         self._command_listeners: list[Callable[[CommandResult], None]] = []
+        #: called with the bytes as received (fanout/publisher.py), on the reader thread
+        self._raw_taps: list[Callable[[str, list[bytes], list[float]], None]] = []
         self._pending: dict[int, _Pending] = {}
         self._lock = threading.Lock()
         self._send_lock = threading.Lock()
@@ -141,6 +143,37 @@ class DeviceClient:
         timed out), e.g. to journal it in the log."""
         self._command_listeners.append(callback)
 
+    def add_raw_tap(self, callback: Callable[[str, list[bytes], list[float]], None]) -> None:
+        """Call `callback(path, chunks, times)` with the device's telemetry as received, on
+        the reader thread: each chunk is a UDP datagram from the device (path 'datagram')
+        or, on a stream link, the frames of one decoded block (path 'stream'; RESPONSE
+        frames are never tapped: the CONNECT answer holds the session token).  The
+        callback must not block; an exception is logged and the link goes on."""
+        self._raw_taps.append(callback)
+
+    def remove_raw_tap(self, callback: Callable[[str, list[bytes], list[float]], None]) -> None:
+        if callback in self._raw_taps:
+            self._raw_taps.remove(callback)
+
+    def _tap(self, path: str, chunks: list[bytes], times: list[float]) -> None:
+        for cb in list(self._raw_taps):
+            try:
+                cb(path, chunks, times)
+            except Exception:
+                log.exception("raw telemetry tap %r failed", cb)
+
+    def _tap_stream(self, blocks: list[TelemetryBlock]) -> None:
+        """A stream's telemetry frames, one chunk per block, as they were received."""
+        chunks, times = [], []
+        allowed = self.intake.allowed["stream"]       # the intake counts the others
+        for b in blocks:
+            if b.name == "RESPONSE" or b.name not in allowed or not len(b):
+                continue
+            chunks.append(b.raw.tobytes() if b.raw is not None else b"".join(b.frames))
+            times.append(float(b.host_time[0]))
+        if chunks:
+            self._tap("stream", chunks, times)
+
     def start(self) -> None:
         """Start the reader threads (no I/O before this)."""
         if self._threads:
@@ -188,7 +221,10 @@ class DeviceClient:
                     self._lost(str(exc))
                 return
             if data:
-                self._dispatch(self._stream.feed(data, time.time()), "stream")
+                blocks = self._stream.feed(data, time.time())
+                if self._raw_taps:
+                    self._tap_stream(blocks)
+                self._dispatch(blocks, "stream")
 
     def _read_datagrams(self) -> None:
         assert self.telemetry is not None and self._datagrams is not None
@@ -201,6 +237,8 @@ class DeviceClient:
                     self._lost(str(exc))
                 return
             datagrams, times = self.intake.datagrams(datagrams, times, sources)
+            if datagrams and self._raw_taps:
+                self._tap("datagram", datagrams, times)
             if datagrams:
                 self._dispatch(self._datagrams.decode(datagrams, times), "datagram")
             elif self._draining.is_set():

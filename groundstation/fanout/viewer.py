@@ -1,0 +1,289 @@
+"""`WatchClient`: a read-only console's telemetry source, over a ZeroMQ SUB socket.
+
+It satisfies the TelemetrySource contract as the live DeviceClient and the replay do,
+and has the parts of the client that the recorder, `monitor` and the window read
+(`stats`, `link_state`, command and link listeners, `command`, `abort`), so they run on
+it unchanged.  It decodes the published frames with this console's own dictionary and
+DatagramDecoder, exactly as the commander decodes them, and keeps its own LinkStatistics:
+its drops are its own (frames missing from the packets' sequence numbers, whatever
+lost them: the device link, or this viewer being too slow for the publisher's
+high-water mark).  Messages it missed are counted too (`missed_messages`).
+
+It never holds a session token.  `command` refuses everything but ABORT with
+ReadOnlyConsole; ABORT goes straight to the device (abort.py).  Link states: 'up' while
+messages arrive, 'lost' after `silence_s` without any (ZeroMQ keeps reconnecting by
+itself: 'up' again when the publisher is back), 'closed'.  What the commander's own
+link does arrives as 'remote' events (add_remote_listener) and in `hello`.
+"""
+
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+from ..codec import DatagramDecoder, FrameCodec
+from ..link.client import CommandResult, StageRecord
+from ..link.intake import TelemetryIntake
+from ..link.stats import LinkStatistics
+from . import wire
+from .abort import send_abort
+from .endpoints import FanoutError, ReadOnlyConsole, parse_endpoint, read_only_message
+
+log = logging.getLogger(__name__)
+
+RCVHWM = 10000
+
+
+@dataclass
+class FanoutCounters:
+    """Counted like the deframer's counters, so the link statistics show them."""
+    messages: int = 0
+    missed_messages: int = 0
+    bad_messages: int = 0
+    recent_errors: deque = field(default_factory=lambda: deque(maxlen=16))
+
+    def as_dict(self) -> dict[str, int]:
+        return {k: v for k, v in self.__dict__.items() if k != "recent_errors"}
+
+
+class WatchClient:
+    """Watches a publishing station: see the module docstring."""
+
+    def __init__(self, dictionary, endpoint: str, *, curve_keys: str | None = None,
+                 key_name: str = "viewer", rcvhwm: int = RCVHWM, silence_s: float = 3.0,
+                 rcvbuf: int | None = None):
+        self.dictionary = dictionary
+        self.endpoint = parse_endpoint(endpoint, for_bind=False).text
+        self.address = self.endpoint
+        self.curve_keys, self.key_name = curve_keys, key_name
+        self.rcvhwm, self.rcvbuf = rcvhwm, rcvbuf
+        self.silence_s = silence_s
+        self.session_token = None               # never: a viewer commands nothing
+        self.stats = LinkStatistics(dictionary.control_rate_hz)
+        self._decoder = DatagramDecoder(FrameCodec(dictionary))
+        self.intake = TelemetryIntake(dictionary, None)
+        self.counters = FanoutCounters()
+        for source in (self._decoder.counters, self.intake.counters, self.counters):
+            self.stats.add_framing_source(source)
+        self.link_state = "closed"
+        self.link_error = ""
+        #: the publisher's newest hello (device, protocol, the commander's link health)
+        self.hello: dict[str, Any] = {}
+        self._subscribers: list[Callable] = []
+        self._link_listeners: list[Callable[[str, str], None]] = []
+        self._command_listeners: list[Callable[[CommandResult], None]] = []
+        self._remote_listeners: list[Callable[[str, str], None]] = []
+        self._expected: int | None = None
+        self._instance: str | None = None
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._last_message = 0.0
+
+    # ------------------------------------------------------------------ contract
+    def subscribe(self, callback: Callable) -> None:
+        self._subscribers.append(callback)
+
+    def unsubscribe(self, callback: Callable) -> None:
+        if callback in self._subscribers:
+            self._subscribers.remove(callback)
+
+    def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
+        self._link_listeners.append(callback)
+
+    def remove_link_listener(self, callback: Callable[[str, str], None]) -> None:
+        if callback in self._link_listeners:
+            self._link_listeners.remove(callback)
+
+    def add_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
+        """Hears the commander's commands (from the publisher) and this console's ABORTs."""
+        self._command_listeners.append(callback)
+
+    def remove_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
+        if callback in self._command_listeners:
+            self._command_listeners.remove(callback)
+
+    def add_remote_listener(self, callback: Callable[[str, str], None]) -> None:
+        """`callback(state, message)` when the commander's device link changes state."""
+        self._remote_listeners.append(callback)
+
+    @property
+    def device(self) -> dict[str, Any] | None:
+        return self.hello.get("device")
+
+    # ------------------------------------------------------------------ commands
+    def command(self, name: str, *, on_stage=None, **args: Any) -> CommandResult:
+        """ABORT goes to the device; anything else is refused, nothing is sent."""
+        if name == "ABORT":
+            return self.abort()
+        raise ReadOnlyConsole(f"{name}: {read_only_message(self.endpoint)}")
+
+    def abort(self) -> CommandResult:
+        return send_abort(self.dictionary, self.device, self.endpoint,
+                          on_result=self._notify_command)
+
+    def connect(self, take_over: bool = False) -> None:
+        raise ReadOnlyConsole(f"CONNECT: {read_only_message(self.endpoint)}")
+
+    # ------------------------------------------------------------------ running
+    def start(self) -> "WatchClient":
+        """Connect the SUB socket and start the reader thread (ZeroMQ connects lazily:
+        nothing fails here when no one publishes yet - see wait_up)."""
+        if self._thread is not None:
+            return self
+        import zmq
+
+        ctx = zmq.Context()
+        sock = ctx.socket(zmq.SUB)
+        sock.rcvhwm = self.rcvhwm
+        sock.linger = 0
+        if self.rcvbuf is not None:          # the kernel's buffer (tests: a small one)
+            sock.rcvbuf = self.rcvbuf
+        try:
+            if self.curve_keys is not None:
+                from .keys import secure_viewer
+                secure_viewer(sock, self.curve_keys, self.key_name)
+            sock.subscribe(b"")
+            sock.connect(self.endpoint)
+        except BaseException:
+            sock.close(linger=0)
+            ctx.term()
+            raise
+        self._set_state("connecting", self.endpoint)
+        self._thread = threading.Thread(target=self._read, args=(ctx, sock),
+                                        name="gs-fanout-viewer", daemon=True)
+        self._thread.start()
+        return self
+
+    def wait_up(self, timeout: float = 5.0) -> "WatchClient":
+        """Wait until the publisher's first hello (its device address) has arrived."""
+        deadline = time.monotonic() + timeout
+        while not self.hello and time.monotonic() < deadline and not self._stop.is_set():
+            time.sleep(0.02)
+        if not self.hello:
+            keys = (" with these CURVE keys (is this console's public key in the "
+                    "publisher's authorized/ folder?)" if self.curve_keys else "")
+            raise FanoutError(f"no station publishes on {self.endpoint}{keys} within "
+                              f"{timeout:g} s - start the commanding station with "
+                              f"--publish {self.endpoint}")
+        return self
+
+    def _read(self, ctx, sock) -> None:
+        import zmq
+
+        try:
+            while not self._stop.is_set():
+                if sock.poll(100, zmq.POLLIN):
+                    while True:           # everything queued, then look at the clock again
+                        try:
+                            parts = sock.recv_multipart(zmq.NOBLOCK)
+                        except zmq.Again:
+                            break
+                        self._on_parts(parts)
+                elif (self.link_state == "up"
+                      and time.monotonic() - self._last_message > self.silence_s):
+                    self._set_state("lost", f"no word from the publisher at {self.endpoint} "
+                                            f"for {self.silence_s:g} s - still listening")
+        finally:
+            sock.close(linger=0)
+            ctx.term()
+
+    def _on_parts(self, parts: list[bytes]) -> None:
+        self._last_message = time.monotonic()
+        try:
+            msg = wire.parse(parts)
+        except (wire.WireError, ValueError) as exc:
+            self.counters.bad_messages += 1
+            self.counters.recent_errors.append(FanoutError(str(exc)))
+            return
+        self.counters.messages += 1
+        if self._expected is not None and msg.sequence > self._expected:
+            self.counters.missed_messages += msg.sequence - self._expected
+        self._expected = msg.sequence + 1       # lower: the publisher restarted
+        if self.link_state != "up":
+            self._set_state("up", self.endpoint)
+        try:
+            if msg.topic == wire.TOPIC_FRAMES:
+                self._on_frames(msg)
+            elif msg.topic == wire.TOPIC_HELLO:
+                self._on_hello(msg.record)
+            elif msg.topic == wire.TOPIC_COMMAND:
+                self._on_command(msg.record)
+            elif msg.topic == wire.TOPIC_LINK:
+                self._remote(str(msg.record.get("state")), str(msg.record.get("message", "")))
+        except Exception:                  # a listener's bug must not stop the console
+            log.exception("handling a %s message", msg.topic.decode())
+
+    def _on_frames(self, msg: wire.Message) -> None:
+        blocks = self.intake.blocks(self._decoder.decode(msg.chunks, msg.times), "stream")
+        for block in blocks:
+            if block.name == "RESPONSE":
+                continue
+            self.stats.update(block)
+            for cb in list(self._subscribers):
+                try:
+                    cb(block)
+                except Exception:
+                    log.exception("telemetry subscriber %r failed", cb)
+
+    def _on_hello(self, record: dict[str, Any]) -> None:
+        first = not self.hello
+        if first and record.get("dictionary_hash") not in (None, f"{self.dictionary.hash:08x}"):
+            text = (f"the commanding station decodes with dictionary {record['dictionary_hash']}"
+                    f", this console with {self.dictionary.hash:08x}: the frames are decoded "
+                    f"here with this console's dictionary (logs keep the raw frames)")
+            self.counters.recent_errors.append(FanoutError(text))
+            log.warning("%s", text)
+        if record.get("instance") != self._instance and self._instance is not None:
+            self._remote("restarted", "the commanding station started publishing again")
+        self._instance = record.get("instance")
+        self.hello = record
+
+    def _on_command(self, record: dict[str, Any]) -> None:
+        stages = [StageRecord(**{k: s.get(k) for k in ("stage", "reason", "host_time",
+                                                         "device_tick")})
+                  for s in record.get("stages", [])]
+        result = CommandResult(str(record.get("name")), int(record.get("sequence", 0)),
+                               dict(record.get("arguments", {})), stages,
+                               dict(record.get("reply", {})), int(record.get("retries", 0)))
+        self._notify_command(result)
+
+    def _notify_command(self, result: CommandResult) -> None:
+        for cb in list(self._command_listeners):
+            try:
+                cb(result)
+            except Exception:
+                log.exception("command listener failed")
+
+    def _remote(self, state: str, message: str) -> None:
+        for cb in list(self._remote_listeners):
+            try:
+                cb(state, message)
+            except Exception:
+                log.exception("remote link listener failed")
+
+    def _set_state(self, state: str, message: str) -> None:
+        self.link_state, self.link_error = state, message
+        for cb in list(self._link_listeners):
+            try:
+                cb(state, message)
+            except Exception:
+                log.exception("link listener failed")
+
+    def close(self) -> None:
+        """Stop watching; safe to call twice."""
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        if self.link_state != "closed":
+            self._set_state("closed", "")
+
+    def __enter__(self) -> "WatchClient":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
