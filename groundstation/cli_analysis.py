@@ -109,7 +109,9 @@ def add_parsers(sub) -> None:
                        description="One row of figures per log: jitter of the scored LOS sensor, "
                                    "control energy per motor, RMS currents, saturation, PSD.",
                        epilog=EPILOG, formatter_class=argparse.RawDescriptionHelpFormatter)
-    s.add_argument("logs", nargs="+", metavar="LOG", help="recorded log(s) (.h5)")
+    s.add_argument("logs", nargs="+", metavar="LOG",
+                   help="recorded log(s) (.h5), folders of logs (searched recursively) or "
+                        "quoted globs ('logs/2026-*/*.h5')")
     s.add_argument("--metrics", type=_metrics, default=METRICS,
                    help=f"comma-separated, from {','.join(ALL_METRICS)} "
                         f"(default: {','.join(METRICS)})")
@@ -140,13 +142,67 @@ def add_parsers(sub) -> None:
     s.add_argument("--plot", default=None, metavar="FILE.png",
                    help="also draw the PSD and cumulative RMS of the scored sensor (computes "
                         "the PSD even if --metrics leaves it out)")
+    b = s.add_argument_group(
+        "many logs (a table, on Dask)",
+        "With --table, --scheduler, --workers or --serial the logs are analysed as a batch: "
+        "one task per log on Dask worker processes (or one after the other with --serial), "
+        "one row per log with its campaign, design, base motion and seed, a progress bar on "
+        "stderr; a log that cannot be read is a row with its error.  See docs/analysis.md.")
+    b.add_argument("--table", default=None, metavar="OUT",
+                   help="write the table to OUT.parquet and OUT.csv (only one of them if OUT "
+                        "ends in .parquet or .csv)")
+    b.add_argument("--scheduler", type=_scheduler, default=None, metavar="local|none|tcp://HOST:8786",
+                   help="local: worker processes on this host (default for a batch); none: a "
+                        "serial loop in this process; tcp://HOST:8786: a dask.distributed "
+                        "cluster whose workers see the logs under the same paths")
+    b.add_argument("--workers", type=_count, default=None, metavar="N",
+                   help="local worker processes (default: one per core)")
+    b.add_argument("--serial", action="store_true", help="the same as --scheduler none")
     s.set_defaults(func=_cmd_analyze)
+
+
+def _scheduler(text: str) -> str:
+    if text in ("local", "none") or "://" in text:
+        return text
+    raise argparse.ArgumentTypeError(f"local, none or a scheduler address tcp://HOST:PORT, "
+                                     f"not {text!r}")
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, not {text}")
+    return value
+
+
+def _expand(names: list[str]) -> list[str]:
+    """The logs named on the command line: a folder gives its .h5 files (recursively), a
+    glob the shell did not expand gives its matches; a file stays as it was written."""
+    import glob
+
+    out: list[str] = []
+    for name in names:
+        p = Path(name)
+        if p.is_dir():
+            out += sorted(str(q) for q in p.rglob("*.h5") if q.is_file())
+        elif not p.exists() and glob.has_magic(name):
+            out += sorted(q for q in glob.glob(name, recursive=True)
+                          if q.endswith(".h5")) or [name]             # no match: its row says so
+        else:
+            out.append(name)
+    return out
 
 
 def _cmd_analyze(args) -> int:
     if args.start is not None and args.stop is not None and args.start > args.stop:
         print(f"error: --from {args.start:g} s is after --to {args.stop:g} s", file=sys.stderr)
         return 2
+    if args.table or args.scheduler or args.workers or args.serial:
+        return _cmd_batch(args)
+    args.logs = _expand(args.logs)
     from .analysis.log_metrics import analyze_log
     from .errors import GroundStationError
     from .plant.testbed import load_testbed
@@ -200,6 +256,99 @@ def _cmd_analyze(args) -> int:
             print("error: no spectrum to plot (no log could be analysed)", file=sys.stderr)
             failed = True
     return 1 if failed else 0
+
+
+def _cmd_batch(args) -> int:
+    """Many logs as one table: one Dask task per log (analysis/batch_dask.py), or the same
+    task in a loop here (--serial); rows in the order of the sorted paths."""
+    for flag, given in (("--plot", args.plot), ("--slope-table", args.slope_table)):
+        if given:
+            print(f"error: {flag} is for single logs, not with --table/--scheduler/--workers/"
+                  f"--serial", file=sys.stderr)
+            return 2
+    scheduler = "none" if args.serial else (args.scheduler or "local")
+    if args.serial and args.scheduler not in (None, "none"):
+        print(f"error: --serial and --scheduler {args.scheduler}: choose one", file=sys.stderr)
+        return 2
+    from .analysis.batch import (TABLE_KEYS, BatchOptions, campaign_index, default_workers,
+                                 find_logs, run_serial)
+    from .analysis.batch_table import write_table
+    from .plant.testbed import load_testbed
+
+    if args.testbed:
+        load_testbed(args.testbed)                   # a bad file: exit 2 here, not per log
+    paths = find_logs(args.logs)
+    if not paths:
+        print("error: no .h5 logs in " + " ".join(args.logs), file=sys.stderr)
+        return 2
+    options = BatchOptions(metrics=tuple(args.metrics), start_s=args.start, stop_s=args.stop,
+                           sensor=args.sensor, integration_period_s=args.integration_period,
+                           psd_segment_s=args.psd_segment,
+                           testbed=str(Path(args.testbed).absolute()) if args.testbed else None,
+                           frf_input=args.frf_input, frf_output=args.frf_output)
+    known = campaign_index(paths)
+    progress = _ProgressBar(len(paths))
+    if scheduler == "none":
+        rows = run_serial(paths, options, known, progress)
+    else:
+        from .analysis.batch_dask import run_dask
+        if not args.verbose:
+            # distributed logs every start and stop of its scheduler and workers at INFO;
+            # the progress bar is what an operator wants to see (-v shows them)
+            # (after importing distributed: its import sets its loggers' levels)
+            import logging
+
+            import distributed  # noqa: F401
+            logging.getLogger("distributed").setLevel(logging.WARNING)
+        workers = args.workers or default_workers()
+        where = (f"{workers} local worker process(es)" if scheduler == "local"
+                 else f"the cluster at {scheduler}")
+        print(f"{len(paths)} logs on {where}", file=sys.stderr)
+        try:
+            rows = run_dask(paths, options, known, scheduler=scheduler, workers=workers,
+                            progress=progress)
+        except (OSError, TimeoutError) as exc:       # no scheduler there, refused, timed out
+            print(f"error: Dask scheduler {scheduler}: {exc}", file=sys.stderr)
+            return 2
+    failed = [r for r in rows if r["error"]]
+    if args.table:
+        files = write_table(rows, args.table, TABLE_KEYS)
+        print("table: " + ", ".join(str(f) for f in files), file=sys.stderr)
+    if args.json:
+        print(json.dumps(rows, indent=2))
+    elif args.csv:
+        w = csv.DictWriter(sys.stdout, fieldnames=TABLE_KEYS, lineterminator="\n")
+        w.writeheader()
+        for row in rows:
+            w.writerow({k: "" if v is None else v for k, v in row.items()})
+    else:
+        print(f"{len(rows)} logs, {len(rows) - len(failed)} analysed without error, "
+              f"{len(failed)} with errors")
+        for r in failed:
+            print(f"{r['log']}: error: {r['error']}")
+    return 1 if failed else 0
+
+
+class _ProgressBar:
+    """`[#####-----] k/n logs` on stderr: redrawn in place on a terminal, a line per tenth
+    of the batch otherwise (a log file should not get a line per log of thousands)."""
+
+    WIDTH = 30
+
+    def __init__(self, total: int):
+        self.total = total
+        self.tty = sys.stderr.isatty()
+        self.shown = -1
+
+    def __call__(self, done: int, total: int) -> None:
+        tenth = done * 10 // max(total, 1)
+        if not self.tty and tenth == self.shown and done != total:
+            return
+        self.shown = tenth
+        fill = done * self.WIDTH // max(total, 1)
+        bar = f"[{'#' * fill}{'-' * (self.WIDTH - fill)}] {done}/{total} logs"
+        end = "\n" if (done == total or not self.tty) else ""
+        print(("\r" if self.tty else "") + bar, end=end, file=sys.stderr, flush=True)
 
 
 def _extras(name: str, extras: tuple[str, ...], args, testbed) -> dict:

@@ -1,0 +1,95 @@
+"""The batch of batch.py on Dask: one task per log, on local worker processes or on a
+dask.distributed cluster.
+
+    rows = run_dask(paths, BatchOptions(), scheduler="local", workers=2, progress=show)
+    rows = run_dask(paths, BatchOptions(), scheduler="tcp://head:8786")
+
+Each task is `batch.analyze_one(path, options, identity)`: the worker opens the log
+itself (a path travels, never the data), so a remote cluster needs the logs on a file
+system its workers share with this host, under the same paths.  A row comes back (a
+few hundred bytes), in the order of `paths` whatever order the tasks finish in.
+
+Why processes and one thread each: the work is numpy, scipy and HDF5 decompression,
+and HDF5 (h5py) holds a global lock, so threads of one process would mostly wait for
+each other.  The local cluster binds to loopback and opens no dashboard: nothing is
+listening beyond this host, and no port can be taken by another user's dashboard.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import uuid
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+from .batch import BatchOptions, analyze_one, error_row
+
+log = logging.getLogger(__name__)
+
+
+@contextlib.contextmanager
+def dask_client(scheduler: str = "local", workers: int = 2) -> Iterator[Any]:
+    """A dask.distributed Client: on a LocalCluster of `workers` processes (scheduler
+    "local"), or connected to the scheduler at `scheduler` (tcp://HOST:8786).  Closed
+    (and the local cluster shut down) on leaving."""
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler == "local":
+        # without a dashboard the scheduler still serves a few HTTP routes (health,
+        # metrics), by default on port 8787: a port any other cluster on this host may
+        # hold (then distributed warns and moves).  A free loopback port, chosen by the
+        # system, never collides.
+        with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                          host="127.0.0.1", dashboard_address=None,
+                          scheduler_kwargs={"dashboard_address": "127.0.0.1:0"}) as cluster, \
+                Client(cluster) as client:
+            yield client
+    else:
+        with Client(scheduler) as client:
+            yield client
+
+
+def run_on(client, paths: list[Path], options: BatchOptions = BatchOptions(),
+           known: dict[str, dict[str, Any]] | None = None,
+           progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
+    """Every log's row, computed by `client`'s workers, in the order of `paths`;
+    `progress(done, total)` after each log."""
+    from dask.distributed import as_completed
+
+    known = known or {}
+    # keys unique to this call: on a shared cluster another user's batch of the same
+    # file names must not be taken for ours
+    token = uuid.uuid4().hex[:8]
+    # positional iterables are mapped element by element (keywords would be broadcast)
+    futures = client.map(analyze_one, [str(p) for p in paths], [options] * len(paths),
+                         [known.get(str(p)) for p in paths],
+                         key=[f"analyze-log-{token}-{i}-{Path(p).name}" for i, p in enumerate(paths)],
+                         pure=False)
+    index = {f.key: i for i, f in enumerate(futures)}
+    rows: list[dict[str, Any] | None] = [None] * len(paths)
+    for done, future in enumerate(as_completed(futures), 1):
+        i = index[future.key]
+        if future.status == "finished":
+            rows[i] = future.result()
+        else:
+            # analyze_one does not raise: this is a worker that died on the log (HDF5
+            # crashing the process) or a cluster that went away; the log gets a row
+            exc = future.exception()
+            rows[i] = error_row(paths[i], f"task failed: {type(exc).__name__}: {exc}")
+        future.release()                          # its result is ours now: free the worker
+        if progress is not None:
+            progress(done, len(paths))
+    return rows                                   # type: ignore[return-value]
+
+
+def run_dask(paths: list[Path], options: BatchOptions = BatchOptions(),
+             known: dict[str, dict[str, Any]] | None = None, *, scheduler: str = "local",
+             workers: int = 2,
+             progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
+    """run_on() with a client made for the call (see dask_client)."""
+    with dask_client(scheduler, workers) as client:
+        return run_on(client, paths, options, known, progress)
+
+
+__all__ = ["dask_client", "run_dask", "run_on"]
