@@ -13,6 +13,9 @@
     groundstation campaign report REPORT.json   the metrics, charts and HTML again from the logs
     groundstation fg list|identify|set|upload|off   the base-motion generator (cli_fg.py)
     groundstation analyze LOG...           jitter, control energy, PSD of logs (cli_analysis.py)
+    groundstation gui|monitor|record --watch tcp://HOST:PORT   a read-only console (fanout/)
+    groundstation gui|monitor --publish tcp://127.0.0.1:PORT   ... fed by the commanding station
+    groundstation fanout keys DIR [--name NAME]   CURVE keys for consoles beyond loopback
 """
 
 from __future__ import annotations
@@ -139,8 +142,20 @@ def _cmd_monitor(args) -> int:
     from .stop_request import StopRequest
 
     d = load_dictionary(args.protocol_dir)
+    if getattr(args, "watch", None):
+        from .fanout.commands import watch_monitor
+        return watch_monitor(args, d)
+    from .fanout.commands import start_publisher
+
+    publisher = start_publisher(args)
+
+    def publish(client):
+        publisher.attach(client, keeper.address)
+        return publisher.detach
+
     with StopRequest() as stop:
         keeper = LinkKeeper(d, args.device, args.testbed, take_over=args.take_over,
+                            on_client=publish if publisher is not None else None,
                             say=lambda text: print(text, flush=True))
         try:
             client = keeper.open()
@@ -170,6 +185,8 @@ def _cmd_monitor(args) -> int:
             return 0
         finally:
             keeper.close()
+            if publisher is not None:
+                publisher.close()
 
 
 def _cmd_run(args) -> int:
@@ -189,7 +206,37 @@ def _cmd_gui(args) -> int:
 
     connect = None if args.device == "none" else args.device
     return run_gui(load_dictionary(args.protocol_dir), connect=connect, testbed=args.testbed,
-                   replay=args.replay)
+                   replay=args.replay, watch=args.watch, publish=args.publish,
+                   curve_keys=args.curve_keys, key_name=args.key_name)
+
+
+def _cmd_watch_record(args) -> int:
+    from .fanout.commands import watch_record
+
+    return watch_record(args, load_dictionary(args.protocol_dir))
+
+
+def _cmd_fanout(args) -> int:
+    from .fanout.commands import make_keys
+
+    return make_keys(args)
+
+
+def _add_console_options(s, *, watch: bool = True, publish: bool = True) -> None:
+    """Many consoles on one rig (docs/consoles.md): watch a publishing station, or publish."""
+    if watch:
+        s.add_argument("--watch", default=None, metavar="tcp://HOST:PORT",
+                       help="a read-only console on the station publishing there (--device "
+                            "is then not used): same views, no commands but Abort")
+        s.add_argument("--wait", type=float, default=10.0, help=argparse.SUPPRESS)
+    if publish:
+        s.add_argument("--publish", default=None, metavar="tcp://127.0.0.1:PORT",
+                       help="publish what this station receives for read-only consoles "
+                            "(loopback; a wider address needs --curve-keys)")
+    s.add_argument("--curve-keys", default=None, metavar="DIR",
+                   help="the lab's CURVE keys (groundstation fanout keys DIR)")
+    s.add_argument("--key-name", default="viewer",
+                   help="--watch with --curve-keys: this console's key pair (default viewer)")
 
 
 def _positive_float(text: str) -> float:
@@ -254,13 +301,27 @@ def build_parser() -> argparse.ArgumentParser:
                        help="take the session over from another host")
         s.add_argument("--no-reconnect", action="store_true",
                        help="stop (exit status 1) when the link is lost, instead of reconnecting")
+        if name == "monitor":
+            _add_console_options(s)
         s.set_defaults(func=_cmd_monitor if name == "monitor" else _cmd_run)
     s = sub.add_parser("gui", help="the operator's window")
     s.add_argument("--device", default="sim", help="sim | tcp://HOST:PORT | serial://PORT | none")
     s.add_argument("--testbed", default=None, help="testbed file for --device sim")
     s.add_argument("--replay", default=None, help="open this log in replay instead")
+    _add_console_options(s)
     s.set_defaults(func=_cmd_gui)
     cli_logs.add_parsers(sub)
+    record = sub.choices["record"]            # `record --watch`: the viewer's recording
+    _add_console_options(record, publish=False)
+    own_record = record.get_default("func")
+    record.set_defaults(func=lambda a: _cmd_watch_record(a) if a.watch else own_record(a))
+    s = sub.add_parser("fanout", help="CURVE keys for read-only consoles beyond loopback")
+    fsub = s.add_subparsers(dest="action", required=True)
+    k = fsub.add_parser("keys", help="make the publisher's key pair (once) and a viewer's, "
+                                     "authorised (docs/consoles.md)")
+    k.add_argument("folder")
+    k.add_argument("--name", default="viewer", help="the viewer's key pair (default viewer)")
+    s.set_defaults(func=_cmd_fanout)
     cli_params.add_parsers(sub)
     cli_profile.add_parsers(sub)
     cli_campaign.add_parsers(sub)

@@ -16,7 +16,10 @@ def display_available() -> bool:
 
 
 def run_gui(dictionary: Dictionary, *, connect: str | None = "sim", testbed: str | None = None,
-            replay: str | None = None) -> int:
+            replay: str | None = None, watch: str | None = None, publish: str | None = None,
+            curve_keys: str | None = None, key_name: str = "viewer") -> int:
+    """`watch`: a read-only console on the station publishing there (connect is then not
+    used); `publish`: this window's link published for such consoles (docs/consoles.md)."""
     from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
@@ -29,7 +32,12 @@ def run_gui(dictionary: Dictionary, *, connect: str | None = "sim", testbed: str
     session = Session(dictionary)
     window = MainWindow(session)
     window.show()
-    if replay:
+    if publish and not watch:
+        session.start_publishing(publish, curve_keys)
+    if watch:
+        session.testbed = testbed
+        session.watch(watch, curve_keys, key_name)
+    elif replay:
         session.open_log(replay)
     elif connect == "sim":
         session.connect_sim(testbed)

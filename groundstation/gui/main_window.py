@@ -260,7 +260,24 @@ class MainWindow(QMainWindow):
         if path:
             self.session.open_log(path)
 
+    def _read_only(self, reason: str | None) -> None:
+        """Watch mode: every command control off with the reason as its tooltip; the
+        Abort button, Esc and the ABORT menu stay (ABORT goes straight to the device)."""
+        self.commands.set_read_only(reason)
+        for w in (self.parameters, self.generator, self.profiles, self.campaign):
+            w.setEnabled(reason is None)
+            w.setToolTip(reason or "")
+        self.commands.abort_button.setToolTip(
+            "ABORT straight to the device (any host may send it, no session needed)"
+            if reason is not None else "")
+
     def _source_changed(self, kind: str, text: str) -> None:
+        from ..fanout.endpoints import read_only_message
+
+        self._read_only(read_only_message(text) if kind == "watch" else None)
+        if kind == "watch":
+            self.setWindowTitle(f"Ground station - read-only console watching {text}")
+            return
         self.replay_toolbar.setVisible(kind == "replay")
         if kind == "replay":
             self.setWindowTitle(f"Ground station - replay of {Path(text).name}")

@@ -318,6 +318,19 @@ class CommandPanel(QWidget):
         self._follow_timer.timeout.connect(self.follow_device)
         self._follow_timer.start(100)
 
+    def set_read_only(self, reason: str | None) -> None:
+        """A watching console (`reason` says why) has every control off but Abort, each
+        with the reason as its tooltip; None turns them back on."""
+        if not hasattr(self, "_own_tips"):
+            self._own_tips = {}
+        controls = [w for kind in (QPushButton, QComboBox, QCheckBox) for w in self.findChildren(kind)]
+        for w in controls:
+            if w is self.abort_button:
+                continue
+            self._own_tips.setdefault(w, w.toolTip())
+            w.setEnabled(reason is None)
+            w.setToolTip(reason if reason is not None else self._own_tips[w])
+
     def follow_device(self) -> None:
         """Show the device's newest mode and friction-compensation state when they
         change.  Signals are blocked: following the device sends nothing."""

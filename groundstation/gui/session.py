@@ -85,6 +85,11 @@ class Session(QObject):
         self.station: Station | None = None
         self.replay: ReplaySource | None = None
         self.sim: SimulatorProcess | None = None
+        #: the endpoint this window watches read-only (fanout.WatchClient as self.client;
+        #: no Station: the verbs say "not connected"), or None
+        self.watching: str | None = None
+        #: fanout.Publisher: what this window's link receives, for read-only consoles
+        self.publisher = None
         self.recorder: Recorder | None = None
         self._detach_recorder = None           # undoes attach_recorder on the current link
         self.address: str = ""
@@ -133,6 +138,59 @@ class Session(QObject):
 
     def connect_address(self, address: str) -> None:
         self._start_link(address)
+
+    # ------------------------------------------------------------------ consoles (fanout/)
+    def watch(self, endpoint: str, curve_keys: str | None = None, key_name: str = "viewer") -> None:
+        """A read-only console on the station publishing at `endpoint`: the same charts,
+        status, recording and analysis; commands refused but ABORT, which goes straight
+        to the device (fanout/viewer.py).  ZeroMQ reconnects by itself: no back-off here."""
+        from ..fanout.viewer import WatchClient
+
+        self.close_replay()
+        self.disconnect_link()
+        try:
+            viewer = WatchClient(self.d, endpoint, curve_keys=curve_keys, key_name=key_name)
+        except GroundStationError as exc:
+            self.sig_link_state.emit("failed", str(exc))
+            self.sig_event.emit("ERROR", "watch", str(exc))
+            return
+        self.address = self.watching = viewer.endpoint
+        self.store.clear()
+        for cb in (self.store, self.limits, self._on_block):
+            viewer.subscribe(cb)
+        viewer.add_link_listener(lambda s, m: self.sig_link_state.emit(s, m))
+        viewer.add_command_listener(self._on_command_done)
+        viewer.add_remote_listener(lambda s, m: self.sig_event.emit(
+            "INFO" if s == "up" else "WARNING", "commander", f"the commanding station's link "
+            f"{s}" + (f": {m}" if m else "")))
+        self.client = viewer
+        self.sig_source.emit("watch", viewer.endpoint)
+
+        def start() -> None:
+            try:
+                viewer.start().wait_up(timeout=10.0)
+            except GroundStationError as exc:     # keeps listening: up when one publishes
+                self.sig_event.emit("WARNING", "watch", str(exc))
+                return
+            device = (viewer.device or {}).get("address", "?")
+            self.sig_event.emit("INFO", "watch", f"watching {viewer.endpoint} read-only: "
+                                                 f"device {device}")
+        self._worker(start, "gs-watch")
+
+    def start_publishing(self, endpoint: str, curve_keys: str | None = None) -> bool:
+        """Publish what this window's device link receives (now and after reconnects)."""
+        from ..fanout.publisher import Publisher
+
+        try:
+            self.publisher = Publisher(endpoint, curve_keys=curve_keys)
+        except GroundStationError as exc:
+            self.sig_event.emit("ERROR", "publish", str(exc))
+            return False
+        if self.client is not None and self.watching is None:
+            self.publisher.attach(self.client, self.address)
+        self.sig_event.emit("INFO", "publish", f"publishing on {self.publisher.endpoint}: "
+                                               f"groundstation gui --watch {self.publisher.endpoint}")
+        return True
 
     @property
     def fg_resource(self) -> str | None:
@@ -189,6 +247,8 @@ class Session(QObject):
                 client.close()
                 raise
             self.client, self.station = client, station
+            if self.publisher is not None:
+                self.publisher.attach(client, address)
             if self.recorder is not None and self.recorder.state == "recording":
                 self._detach_recorder = attach_recorder(client, self.recorder)   # a reconnect keeps recording
             self._attempt = 0
@@ -208,6 +268,9 @@ class Session(QObject):
         self._reconnect.stop()
         self._close_station()
         client, self.client = self.client, None
+        self.watching = None
+        if self.publisher is not None:
+            self.publisher.detach()
         if client is not None:
             self._worker(client.close, "gs-disconnect")
             self.sig_link_state.emit("closed", "")
@@ -244,6 +307,9 @@ class Session(QObject):
         if self.sim is not None:
             self.sim.stop()
             self.sim = None
+        if self.publisher is not None:
+            self.publisher.close()
+            self.publisher = None
         self.close_replay()
 
     def _on_link_state(self, state: str, message: str) -> None:

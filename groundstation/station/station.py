@@ -74,8 +74,12 @@ class Station:
                  take_over: bool = False, speed: float = 1.0,
                  dictionary: Dictionary | None = None,
                  operator: Callable[[str], bool] | None = None,
-                 echo: Callable[[str], None] | None = None):
+                 echo: Callable[[str], None] | None = None,
+                 publish: str | None = None, curve_keys: str | None = None):
         self.device_spec = device
+        #: publish the link for read-only consoles on this endpoint (fanout/, docs/consoles.md)
+        self.publish, self.curve_keys = publish, curve_keys
+        self.publisher = None
         self.testbed_path = Path(testbed) if testbed else None
         self.fast = fast
         self.generator_spec = generator
@@ -224,6 +228,11 @@ class Station:
         self.echo(f"device {address}" + (f", generator {resource}" if resource else ""))
         self.client = open_client(self.d, address)
         self.client.subscribe(self.state)
+        if self.publish:               # before CONNECT: viewers see the session begin
+            from ..fanout.publisher import Publisher
+            self.publisher = Publisher(self.publish, curve_keys=self.curve_keys)
+            self.publisher.attach(self.client, address)
+            self.echo(f"publishing on {self.publisher.endpoint}")
         self.client.connect(take_over=self.take_over)
         self.clock = (SteppedClock(self._device, self.client, self.abort_event) if self._device
                       else WallClock(self.client, self.abort_event))
@@ -549,6 +558,9 @@ class Station:
             client.unsubscribe(self.state)     # the owner's link goes on without us
         elif client is not None:
             client.close()
+        publisher, self.publisher = self.publisher, None
+        if publisher is not None:              # after the close: viewers hear it end
+            publisher.close()
 
     def _stop_sim(self) -> None:
         dev, self._device = self._device, None

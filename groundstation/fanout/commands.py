@@ -1,0 +1,144 @@
+"""The command line's watching and publishing: `monitor --watch`, `record --watch`,
+`monitor --publish` and `fanout keys` (cli.py parses, these run).
+
+A watching command never commands the rig: it opens a WatchClient on the commander's
+publisher, prints or records what it decodes, and ends on Ctrl-C, SIGTERM or
+--duration.  Exit status as `monitor`/`record`: 0 ended as asked, 1 the recording
+failed, 2 nothing could start (no publisher, bad keys).
+"""
+
+from __future__ import annotations
+
+import time
+
+EXIT_OK, EXIT_FAILED, EXIT_REFUSED = 0, 1, 2
+
+
+def open_viewer(args, dictionary):
+    """A started WatchClient on --watch that has heard the publisher's hello."""
+    from .viewer import WatchClient
+
+    viewer = WatchClient(dictionary, args.watch, curve_keys=args.curve_keys,
+                         key_name=args.key_name)
+    viewer.start()
+    try:
+        viewer.wait_up(timeout=args.wait)
+    except BaseException:
+        viewer.close()
+        raise
+    return viewer
+
+
+def describe(viewer) -> str:
+    hello = viewer.hello
+    device = (hello.get("device") or {}).get("address", "?")
+    return (f"watching {viewer.endpoint} (read-only): device {device}, protocol "
+            f"{hello.get('protocol', '?')}, the commander's link {hello.get('link_state', '?')}")
+
+
+def status_line(viewer) -> str:
+    from ..link.stats import format_snapshot
+
+    c = viewer.counters
+    missed = f" | missed {c.missed_messages} msg" if c.missed_messages else ""
+    return (f"{format_snapshot(viewer.stats.snapshot())}{missed} | commander: "
+            f"{viewer.hello.get('link_state', '?')}, drop={viewer.hello.get('dropped', '?')}")
+
+
+def watch_monitor(args, dictionary) -> int:
+    from ..stop_request import StopRequest
+
+    with StopRequest() as stop:
+        viewer = open_viewer(args, dictionary)
+        try:
+            print(describe(viewer), flush=True)
+            viewer.add_remote_listener(
+                lambda state, message: print(f"commander's link {state}: {message}", flush=True))
+            viewer.add_link_listener(
+                lambda state, message: print(f"watch {state}: {message}", flush=True))
+            t_end = time.monotonic() + args.duration if args.duration else None
+            while not stop.event.wait(args.interval):
+                print(status_line(viewer), flush=True)
+                if t_end is not None and time.monotonic() >= t_end:
+                    break
+            if stop.reason:
+                print(f"stopped: {stop.reason}", flush=True)
+            return EXIT_OK
+        finally:
+            viewer.close()
+
+
+def watch_record(args, dictionary) -> int:
+    """A normal log of what the viewer decodes, with the commander's command journal
+    and link events, and this console's own link statistics (its own gaps)."""
+    from ..logs import Recorder
+    from ..logs.live import attach_recorder
+    from ..plant.testbed import load_testbed
+    from ..stop_request import StopRequest
+
+    testbed = load_testbed(args.testbed) if args.testbed else None
+    failures: list[str] = []
+    with StopRequest() as stop:
+        viewer = open_viewer(args, dictionary)
+        rec = Recorder(dictionary, args.folder, test_name=args.name, notes=args.notes,
+                       testbed_text=testbed.text if testbed else "",
+                       testbed_name=testbed.name if testbed else "",
+                       testbed_path=str(testbed.path) if testbed else "",
+                       rollover_bytes=int(args.rollover_mb * 1e6) if args.rollover_mb else None,
+                       rollover_seconds=args.rollover_min * 60 if args.rollover_min else None,
+                       on_failure=failures.append)
+        try:
+            path = rec.start()
+            print(f"recording to {path}\n{describe(viewer)}", flush=True)
+            detach = attach_recorder(viewer, rec)
+            viewer.add_remote_listener(lambda state, message: rec.record(
+                "event", {"source": "commander link", "state": state, "message": message}))
+            rec.note(f"{describe(viewer)}" + (f"; {args.notes}" if args.notes else ""))
+            code, reason = _record_loop(args, viewer, rec, stop, failures)
+            detach()
+        finally:
+            viewer.close()
+        st = rec.stop(reason=reason)
+        print(f"recorded {st.frames} frames in {len(st.files)} file(s): "
+              + ", ".join(str(p) for p in st.files) + f" - {reason}", flush=True)
+        return code
+
+
+def _record_loop(args, viewer, rec, stop, failures) -> tuple[int, str]:
+    t_end = time.monotonic() + args.duration if args.duration else None
+    while True:
+        if failures:
+            print(f"error: {failures[0]}", flush=True)
+            return EXIT_FAILED, failures[0]
+        if stop.event.is_set():
+            return EXIT_OK, stop.reason
+        if t_end is not None and time.monotonic() >= t_end:
+            return EXIT_OK, f"duration of {args.duration:g} s reached"
+        if stop.event.wait(min(1.0, max(0.0, t_end - time.monotonic())) if t_end else 1.0):
+            continue
+        st = rec.status()
+        print(f"{st.path.name if st.path else ''}: {st.frames} frames | {status_line(viewer)}",
+              flush=True)
+
+
+def make_keys(args) -> int:
+    from .keys import make_keys as make
+
+    for path in make(args.folder, args.name):
+        print(f"wrote {path}")
+    print(f"publisher: --publish tcp://0.0.0.0:PORT --curve-keys {args.folder}; a viewer "
+          f"machine needs publisher.public, {args.name}.public and {args.name}.secret "
+          f"(--watch tcp://HOST:PORT --curve-keys DIR --key-name {args.name})")
+    return EXIT_OK
+
+
+def start_publisher(args):
+    """The Publisher for --publish (None without it); attach() it to each new client."""
+    if not getattr(args, "publish", None):
+        return None
+    from .publisher import Publisher
+
+    pub = Publisher(args.publish, curve_keys=args.curve_keys)
+    print(f"publishing on {pub.endpoint} (read-only consoles: groundstation gui --watch "
+          f"{pub.endpoint})", flush=True)
+    return pub
