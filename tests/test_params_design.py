@@ -230,16 +230,19 @@ def test_relative_designs_are_stable_with_positive_margins(reports, name):
 @pytest.mark.parametrize("name", ["inertial_design1", "inertial_design2"])
 def test_inertial_designs_are_refused_on_the_testbed_model_with_the_gyro_delay(
         designs, reports, dictionary, name):
-    """A finding, not a wish: on inertial_2dof.toml's model the rate loop has 6 deg of
-    phase margin at the flexure mode (22.8 Hz), where c0's notch leaves a peak of the loop
-    gain and the gyro (150 Hz, 2.6 ms delay) and the hold take about 37 deg; the position
-    loop's K_p = 25 costs the last 10 deg (K_p/omega at 22.8 Hz).  The simulator agrees
-    (test_the_loop_model_reproduces_the_simulated_testbed).  With K_p <= 10 it is stable."""
+    """A finding, not a wish: on inertial_2dof.toml's model the rate loop has under 10 deg
+    of phase margin at the flexure mode (22.8 Hz), where c0's notch leaves a peak of the
+    loop gain and the gyro (150 Hz, 2.6 ms as the reference's T_d with the hold included)
+    and the hold take about 34 deg; the position loop's K_p = 25 costs the last 10 deg
+    (K_p/omega at 22.8 Hz).  The closed loop then grows by e in about 13 s: the damping of
+    the reference's own continuous loop (benchmarks/inertial_loop.py, docs/fidelity.md H4).
+    The simulator agrees (test_the_loop_model_reproduces_the_simulated_testbed).  With
+    K_p <= 10 it is stable."""
     r = reports[name]
     assert not r.ok and len(r.problems) == 1
     assert "closed loop is unstable" in r.problems[0] and "22.8 Hz" in r.problems[0]
-    assert 1.0 < r.max_pole_radius < 1.001
-    assert r.inner_margins.gain_margin_db > 10 and 5 < r.inner_margins.phase_margin_deg < 8
+    assert 1.0 < r.max_pole_radius < 1.0002
+    assert r.inner_margins.gain_margin_db > 10 and 8 < r.inner_margins.phase_margin_deg < 11
     assert r.margins.phase_margin_deg < 0
     assert 4.5 < r.outer_margins.gain_crossovers_hz[0] < 5.0        # the reference's ~5 Hz
     values = table_values(designs[name], dictionary=dictionary)

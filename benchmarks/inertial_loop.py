@@ -1,0 +1,146 @@
+"""H4 of docs/fidelity.md: is the reference's inertial loop stable on its own numbers?
+
+Two views of the same loop, each with one number moved at a time:
+
+* continuous: the reference's own model (section 4 plant with b_f, gyro 2nd order with
+  its pure delay as a Pade approximant, the designs' continuous transfer functions, the
+  outer loop K_p on a complementary LOS estimate), i.e. the loop as the reference
+  designed it, before any sampling.  Printed: the least-damped closed-loop pole, its
+  frequency and damping ratio (negative = growing).
+* sampled: the loop the device closes (ZOH plant at 1200 Hz, the uploaded cascades),
+  exactly as `groundstation params validate` computes it.  Printed: the largest |z|.
+
+The printed numbers of the reference carry 3-5 significant figures; moving one by half
+its last digit shows whether its stated precision decides stability at all.
+
+    .venv/bin/python benchmarks/inertial_loop.py
+"""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import math
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import pade
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+from groundstation.params.design_file import load_design  # noqa: E402
+from groundstation.params.loop import validate  # noqa: E402
+from groundstation.plant.model import plant_transfer_functions  # noqa: E402
+from groundstation.params.tf_algebra import TransferFunction  # noqa: E402
+
+DESIGNS = ["inertial_design1", "inertial_design2"]
+PADE_ORDER = 8            # a 2.6 ms delay to within 0.1 deg well past 100 Hz
+
+
+def _poly(tf: TransferFunction) -> tuple[np.ndarray, np.ndarray]:
+    return (tf.gain * np.real(np.poly(tf.zeros)) if len(tf.zeros) else np.array([tf.gain]),
+            np.real(np.poly(tf.poles)) if len(tf.poles) else np.array([1.0]))
+
+
+def _mul(*ps: np.ndarray) -> np.ndarray:
+    out = np.array([1.0])
+    for p in ps:
+        out = np.polymul(out, p)
+    return out
+
+
+def _delay(seconds: float) -> tuple[np.ndarray, np.ndarray]:
+    if seconds <= 0:
+        return np.array([1.0]), np.array([1.0])
+    taylor = [(-seconds) ** i / math.factorial(i) for i in range(2 * PADE_ORDER + 1)]
+    with warnings.catch_warnings():          # the Taylor system is ill-conditioned, the result is fine
+        warnings.simplefilter("ignore")
+        num, den = pade(taylor, PADE_ORDER)
+    return np.asarray(num.coeffs), np.asarray(den.coeffs)
+
+
+def continuous_pole(design, testbed, *, notch_scale: float = 1.0, crossover_hz: float = 2.0) -> complex:
+    """Least-damped closed-loop pole of the continuous loop (rad/s).
+
+    Closed loop: 1 + c0 (c1 g1 + c2 g2) (K_p H_est + s G e^{-sT}) = 0, where the LOS
+    estimate H_est = F_lp + F_hp G e^{-sT} blends the angle (below the crossover) with
+    the integrated gyro (above)."""
+    (g1n, gd), (g2n, _) = plant_transfer_functions(testbed)
+    cas = design.cascades
+    c0 = cas["c0"]
+    if notch_scale != 1.0:                   # move c0's lightly damped zero pair in frequency
+        z = np.array(c0.zeros, dtype=complex)
+        light = np.abs(z.real) < 0.2 * np.abs(z)
+        z[light] *= math.sqrt(notch_scale)
+        c0 = dataclasses.replace(c0, zeros=z)
+    c0n, c0d = _poly(c0)
+    c1n, c1d = _poly(cas["c1"])
+    c2n, c2d = _poly(cas["c2"])
+    # c0 (c1 g1 + c2 g2) = c0n (c1n c2d g1n + c2n c1d g2n) / (c0d c1d c2d gd)
+    Ln = _mul(c0n, np.polyadd(_mul(c1n, c2d, g1n), _mul(c2n, c1d, g2n)))
+    Ld = _mul(c0d, c1d, c2d, gd)
+    s = testbed.sensors
+    wg = 2 * math.pi * s["gyro_bandwidth"]
+    Gn, Gd = np.array([wg ** 2]), np.array([1.0, 2 * s["gyro_damping"] * wg, wg ** 2])
+    dn, dd = _delay(s["gyro_delay"])
+    kp = design.outer_loop_gain_per_s
+    wc = 2 * math.pi * crossover_hz
+    # sensor path over the common denominator (s + wc) Gd dd
+    Sn = np.polyadd(np.polyadd(kp * wc * _mul(Gd, dd), kp * _mul([1.0, 0.0], Gn, dn)),
+                    _mul([1.0, 0.0], [1.0, wc], Gn, dn))
+    Sd = _mul([1.0, wc], Gd, dd)
+    roots = np.roots(np.polyadd(_mul(Ld, Sd), _mul(Ln, Sn)))
+    roots = roots[np.abs(roots) > 1e-6]       # integrator cancellations at the origin
+    return complex(roots[np.argmax(roots.real)])
+
+
+def sampled_radius(design, testbed, prewarp: str | float | None = "keep") -> float:
+    kw = {"testbed": testbed}
+    if prewarp != "keep":
+        kw["prewarp_hz"] = prewarp
+    return validate(dataclasses.replace(design, **kw)).max_pole_radius
+
+
+def _variants(tb):
+    """(label, testbed, notch_scale): the nominal loop, then one printed number at a time
+    moved by half its last digit (and the gyro delay read as including the hold)."""
+    def changed(section: str, key: str, value: float):
+        t = copy.deepcopy(tb)
+        getattr(t, section)[key] = value
+        return t
+    m = tb.mechanics
+    yield "as the reference gives it", tb, 1.0
+    for key, half in [("J1", 0.005), ("J2", 0.005), ("flexure_stiffness", 5.0),
+                      ("flexure_damping", 0.005), ("bearing_viscous", 0.5)]:
+        for sign in (-1, 1):
+            yield f"{key} {m[key] + sign * half:g}", changed("mechanics", key, m[key] + sign * half), 1.0
+    for scale in (1.955e4 / 1.96e4, 1.965e4 / 1.96e4):
+        yield f"c0 notch 1.96e4 read as {1.96e4 * scale:.4g}", tb, scale
+    d = tb.sensors["gyro_delay"]
+    yield f"gyro delay {d * 1e3:.3f} - T/2 (the hold lumped into T_d)", changed("sensors", "gyro_delay", d - 1 / 2400), 1.0
+    yield "bearing_viscous 0 (H2)", changed("mechanics", "bearing_viscous", 0.0), 1.0
+
+
+def main() -> int:
+    for name in DESIGNS:
+        design = load_design(ROOT / "profiles" / "controllers" / f"{name}.toml")
+        print(f"== {name}  (prewarp {design.prewarp_hz} Hz as shipped)")
+        print(f"   {'variant':<48} {'continuous pole':>28} {'zeta':>9} {'sampled |z|':>12} {'plain Tustin':>13}")
+        for label, tb, notch in _variants(design.testbed):
+            p = continuous_pole(design, tb, notch_scale=notch)
+            zeta = -p.real / abs(p)
+            if notch == 1.0:
+                r, r_plain = sampled_radius(design, tb), sampled_radius(design, tb, None)
+                zs = f"{r:12.6f} {r_plain:13.6f}"
+            else:
+                zs = f"{'-':>12} {'-':>13}"
+            print(f"   {label:<48} {p.real:+9.3f}{p.imag:+10.2f}j ({abs(p.imag) / 2 / math.pi:5.2f} Hz) "
+                  f"{zeta:+9.5f} {zs}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
