@@ -71,10 +71,14 @@ def rows_frame(rows: list[dict[str, Any]], columns: Iterable[str]):
     return pd.DataFrame(data)
 
 
-def write_table(rows: list[dict[str, Any]], out: str | Path, columns: Iterable[str]) -> list[Path]:
-    """Write the rows to the file(s) of table_paths(out); returns them.  Raises a
-    GroundStationError when a file cannot be written (the message names it)."""
-    frame = rows_frame(rows, list(columns))
+def write_table(rows: list[dict[str, Any]], out: str | Path,
+                columns: Iterable[str] | None = None) -> list[Path]:
+    """Write the rows to the file(s) of table_paths(out), with `columns` (default: the
+    batch's TABLE_KEYS); returns them.  Raises a GroundStationError when a file cannot
+    be written (the message names it)."""
+    from .batch import TABLE_KEYS
+
+    frame = rows_frame(rows, list(TABLE_KEYS if columns is None else columns))
     written = []
     for path in table_paths(out):
         try:
