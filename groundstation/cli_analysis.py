@@ -144,10 +144,11 @@ def add_parsers(sub) -> None:
                         "the PSD even if --metrics leaves it out)")
     b = s.add_argument_group(
         "many logs (a table, on Dask)",
-        "With --table, --scheduler, --workers or --serial the logs are analysed as a batch: "
-        "one task per log on Dask worker processes (or one after the other with --serial), "
-        "one row per log with its campaign, design, base motion and seed, a progress bar on "
-        "stderr; a log that cannot be read is a row with its error.  See docs/analysis.md.")
+        "With --table, --scheduler, --workers or --serial the logs are analysed as a\n"
+        "batch: one task per log on Dask worker processes (or one after the other with\n"
+        "--serial), one row per log with its campaign, design, base motion and seed, a\n"
+        "progress bar on stderr; a log that cannot be read is a row with its error.\n"
+        "See docs/analysis.md, 'Many logs'.")
     b.add_argument("--table", default=None, metavar="OUT",
                    help="write the table to OUT.parquet and OUT.csv (only one of them if OUT "
                         "ends in .parquet or .csv)")
