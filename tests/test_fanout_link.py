@@ -184,3 +184,19 @@ def test_no_publisher_is_said_plainly(dictionary):
             viewer.wait_up(timeout=0.3)
         with pytest.raises(Exception, match="no hello"):
             viewer.abort()
+
+
+def test_a_watch_client_is_a_telemetry_source(dictionary):
+    """The recorder, the charts and monitor consume it as they consume the live link."""
+    import inspect
+
+    from groundstation.contracts import TelemetrySource
+    from groundstation.link.client import DeviceClient
+
+    viewer = WatchClient(dictionary, "tcp://127.0.0.1:9")
+    assert isinstance(viewer, TelemetrySource)
+    for name in ("subscribe", "unsubscribe", "add_link_listener", "remove_link_listener",
+                 "add_command_listener", "remove_command_listener", "abort", "close"):
+        assert (list(inspect.signature(getattr(WatchClient, name)).parameters)
+                == list(inspect.signature(getattr(DeviceClient, name)).parameters)), name
+    viewer.close()
