@@ -73,6 +73,12 @@ def add_parsers(sub) -> argparse._SubParsersAction:
     s.add_argument("--take-over", action="store_true", help="end another host's session")
     s.add_argument("--no-analysis", action="store_true",
                    help="do not score the logs after the run (no metrics, charts or HTML)")
+    # the same two options as monitor/gui (cli.py); this module cannot import cli.py
+    s.add_argument("--publish", default=None, metavar="tcp://127.0.0.1:PORT",
+                   help="publish what this station receives for read-only consoles "
+                        "(gui/monitor/record --watch; loopback; a wider address needs --curve-keys)")
+    s.add_argument("--curve-keys", default=None, metavar="DIR",
+                   help="the lab's CURVE keys (groundstation fanout keys DIR)")
     s.set_defaults(func=_cmd_run)
     s = actions.add_parser("report", help="score a campaign's logs again from its saved report",
                            description="Reads REPORT.json (written by `campaign run`), scores "
@@ -173,6 +179,9 @@ def _cmd_run(args) -> int:
     try:
         c = load_campaign(args.file, load_dictionary(getattr(args, "protocol_dir", None)))
         resume = CampaignReport.load(args.resume) if args.resume else None
+        if args.publish:                # refused before the rig is touched, not after
+            from .fanout.endpoints import check_bind
+            check_bind(args.publish, have_keys=bool(args.curve_keys))
     except GroundStationError as exc:
         _print_problems(exc)
         return EXIT_MALFORMED
@@ -187,6 +196,7 @@ def _cmd_run(args) -> int:
     try:
         with Testbed(args.device, testbed=c.testbed, fast=args.fast, generator=generator,
                      log_folder=folder, seed=args.seed, take_over=args.take_over, operator=operator,
+                     publish=args.publish, curve_keys=args.curve_keys,
                      echo=lambda text: print(f"    {text}", flush=True)) as tb:
             runner = CampaignRunner(c, tb, max_step_seconds=args.max_step_seconds,
                                     progress=_Progress(len(c.steps)))

@@ -113,3 +113,36 @@ def test_curve_keys_admit_only_the_labs_viewers(dictionary, tmp_path, capsys):
         with WatchClient(dictionary, pub.endpoint) as plain:
             with pytest.raises(FanoutError, match="no station publishes"):
                 plain.wait_up(1.0)
+
+
+def test_a_campaign_publishes_for_watching_consoles(dictionary, tmp_path, capsys):
+    """`campaign run --publish`: a console watching the campaign's station sees its
+    telemetry and its commands; a wider address without keys is refused before anything
+    runs."""
+    import socket
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent.parent
+    campaign = str(root / "profiles" / "campaigns" / "relative_steps.toml")
+    code = main(["campaign", "run", campaign, "--fast", "--publish", "tcp://0.0.0.0:5998",
+                 "--log-folder", str(tmp_path / "refused")])
+    assert code == 2 and "--curve-keys DIR" in capsys.readouterr().err
+    with socket.socket() as s:                  # a free loopback port for the publisher
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    endpoint = f"tcp://127.0.0.1:{port}"
+    seen, commands, result = [], [], {}
+    viewer = WatchClient(dictionary, endpoint).start()
+    viewer.subscribe(lambda b: seen.append(len(b)) if b.name == "HIGH_RATE" else None)
+    viewer.add_command_listener(lambda r: commands.append(r.name))
+    runner = threading.Thread(target=lambda: result.setdefault("code", main(
+        ["campaign", "run", campaign, "--fast", "--publish", endpoint, "--max-step-seconds", "2",
+         "--log-folder", str(tmp_path / "logs"), "--no-analysis"])))
+    runner.start()
+    try:
+        runner.join(300.0)
+    finally:
+        viewer.close()
+    assert not runner.is_alive() and result["code"] == 0
+    assert sum(seen) > 1000                       # the runs' telemetry, decoded by the viewer
+    assert "UPLOAD_COMMIT" in commands or "ARM" in commands
