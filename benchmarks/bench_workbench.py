@@ -15,6 +15,10 @@ N times, as the operator would type it into the editor.  Measured per edit:
   fresh      from the edit to every view up to date (sig_fresh), the worker idle before;
   busy gui   the GUI thread's time for an edit made while the worker still computes the
              previous one (edits back to back, as when typing);
+  cpu        the GUI thread's CPU time (time.thread_time) for the edit and its repaint
+             together: the same work as gui + paint, but not stretched by other
+             processes taking the cores, so it is the figure to hold to the 100 ms target
+             on a shared machine;
   all sync   the same numbers computed on one thread, no Qt (fast_views + slow_views):
              what the edit would cost if nothing ran in the background.
 
@@ -72,13 +76,16 @@ def measure(app, pair, processes: bool, edits: int, screenshot: Path | None) -> 
         fresh_at = []
         wb.sig_fresh.connect(lambda: fresh_at.append(time.perf_counter()))
         wb.slow_ms[0].clear()
+        cpu = []                                         # GUI-thread CPU of edit + repaint
         for g in _gains(g0, edits):                      # worker idle before each edit
             t0 = time.perf_counter()
+            c0 = time.thread_time()
             wb.editor.set_value("Q", "gain", None, f"{g:.6g}")
             gui.append(wb.edit_ms[-1])
             t1 = time.perf_counter()
             app.processEvents()
             paint.append(1e3 * (time.perf_counter() - t1))
+            cpu.append(1e3 * (time.thread_time() - c0))
             _wait_fresh(app, wb)
             fresh.append(1e3 * (fresh_at[-1] - t0))
         slow = list(wb.slow_ms[0])
@@ -95,7 +102,7 @@ def measure(app, pair, processes: bool, edits: int, screenshot: Path | None) -> 
             app.processEvents()
             screenshot.parent.mkdir(parents=True, exist_ok=True)
             wb.grab().save(str(screenshot))
-        return {"gui_ms": gui, "paint_ms": paint, "fresh_ms": fresh, "slow_ms": slow,
+        return {"gui_ms": gui, "paint_ms": paint, "fresh_ms": fresh, "slow_ms": slow, "cpu_ms": cpu,
                 "busy_gui_ms": busy, "process": wb.jobs.uses_process}
     finally:
         wb.shutdown()
@@ -131,7 +138,8 @@ def main() -> None:
     print(f"design workbench benchmark - {machine()}; {args.edits} edits of Q's gain per case")
     med = statistics.median
     results = {"machine": machine(), "edits": args.edits, "cases": {}}
-    head = f"{'case':<34}{'gui':>7}{'paint':>7}{'slow':>7}{'fresh':>7}{'busy gui':>10}{'all sync':>10}"
+    head = (f"{'case':<34}{'gui':>7}{'paint':>7}{'cpu':>7}{'slow':>7}{'fresh':>7}{'busy gui':>10}"
+            f"{'all sync':>10}")
     print("\nmedian (max) in ms\n" + head)
     for pair in PAIRS:
         sync = all_synchronous(pair, args.edits)
@@ -143,7 +151,8 @@ def main() -> None:
             name = f"{pair[0]} + {pair[1].split('_')[-1]}, {where}"
             results["cases"][name] = r
             cell = lambda xs: f"{med(xs):>4.0f}({max(xs):.0f})"
-            print(f"{name:<34}{med(r['gui_ms']):>7.1f}{med(r['paint_ms']):>7.1f}{med(r['slow_ms']):>7.0f}"
+            print(f"{name:<34}{med(r['gui_ms']):>7.1f}{med(r['paint_ms']):>7.1f}{med(r['cpu_ms']):>7.1f}"
+                  f"{med(r['slow_ms']):>7.0f}"
                   f"{med(r['fresh_ms']):>7.0f}{cell(r['busy_gui_ms']):>10}{cell(sync):>10}")
     path = save("workbench", results)
     print(f"\nresults: {path}" + (f"; screenshot: {args.screenshot}" if args.screenshot else ""))
