@@ -48,6 +48,42 @@ class _TimeAxis(pg.DateAxisItem):
         self.showLabel(shown)
 
 
+class ChartCurve(pg.PlotCurveItem):
+    """A strip chart's curve: a bare PlotCurveItem (the panel clips and decimates, so
+    PlotDataItem's own clipping, downsampling and dataset bookkeeping are not needed),
+    which also carries the bounds of its points inside the time window shown.
+
+    The view box asks a curve for its bounds several times per frame to autoscale y;
+    pyqtgraph would scan all points with a mask each time.  `set_points` computes
+    them once, from the points between the window's edges only, as that scan would."""
+
+    def __init__(self, pen) -> None:
+        super().__init__(pen=pen)
+        self._bounds: tuple | None = None
+
+    def set_points(self, x: np.ndarray, y: np.ndarray, lo: float, hi: float) -> None:
+        """Draw (x, y); NaN in y breaks the line.  lo, hi: the time window shown."""
+        self._bounds = None
+        if not len(x):
+            self.setData(x, y)
+            return
+        a, b = int(np.searchsorted(x, lo, side="left")), int(np.searchsorted(x, hi, side="right"))
+        inside = y[a:b]
+        if len(inside) and not np.isnan(inside).all():
+            ybounds = (float(np.nanmin(inside)), float(np.nanmax(inside)))
+        else:
+            ybounds = (None, None)
+        finite = not np.isnan(y).any()
+        # Known finite: pyqtgraph skips its own finite check and builds the path in one go.
+        self.setData(x, y, connect="all" if finite else "finite", skipFiniteCheck=finite)
+        self._bounds = ((float(x[0]), float(x[-1])), ybounds)
+
+    def dataBounds(self, ax, frac=1.0, orthoRange=None):
+        if self._bounds is None or frac < 1.0 or ax not in (0, 1):
+            return super().dataBounds(ax, frac, orthoRange)
+        return self._bounds[ax]
+
+
 class ChartPlot(pg.PlotWidget):
     """One plot of the stack: its curves, gap markers, cursor line and info text.
 
@@ -70,7 +106,6 @@ class ChartPlot(pg.PlotWidget):
         self.setAcceptDrops(True)
         self.setMinimumHeight(90)
         pi = self.getPlotItem()
-        pi.setClipToView(True)
         # No grid by default: on the raster engine a translucent grid doubles the paint
         # time of a scrolling plot (measured); Plot Options → Grid in the menu adds one.
         pi.hideButtons()
@@ -79,7 +114,7 @@ class ChartPlot(pg.PlotWidget):
         vb = pi.getViewBox()
         vb.setAutoVisible(y=True)
         vb.disableAutoRange(axis="x")
-        self.curves: dict[str, pg.PlotDataItem] = {}
+        self.curves: dict[str, ChartCurve] = {}
         self.units: dict[str, DisplayUnit] = {}
         self._names: dict[str, str] = {}
         self.info = pg.TextItem(anchor=(1, 0), color=(235, 235, 235), fill=(0, 0, 0, 140))
@@ -104,9 +139,8 @@ class ChartPlot(pg.PlotWidget):
 
     # ------------------------------------------------------------ curves, axes
     def add_curve(self, cid: str, name: str, unit: DisplayUnit, colour: int,
-                  description: str = "") -> pg.PlotDataItem:
-        curve = pg.PlotDataItem(pen=pg.mkPen(self.PALETTE[colour], width=1))
-        curve.setClipToView(True)
+                  description: str = "") -> ChartCurve:
+        curve = ChartCurve(pg.mkPen(self.PALETTE[colour], width=1))
         curve.setToolTip(f"{cid}: {description}" if description else cid)
         self.curves[cid] = curve
         self.units[cid] = unit

@@ -39,10 +39,11 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushB
                                QSplitter, QVBoxLayout, QWidget)
 
 from ..dictionary import Dictionary
-from ..display_buffers import TelemetryStore, peak_decimate, with_gap_breaks
+from ..display_buffers import TelemetryStore, insert_breaks
 from .channel_tree import ChannelInfo, channel_catalog, format_value
 from .chart_data import (TIMEBASES, WINDOW_MAX_S, WINDOW_MIN_S,  # noqa: F401
-                         WINDOW_PRESETS_S, ChartStats, _Series, _window_label, fetch_series)
+                         WINDOW_PRESETS_S, ChartStats, _Series, _Trace, _window_label,
+                         fetch_series, frozen_trace)
 from .chart_plot import ChartPlot
 from .chart_settings import STATE_VERSION, ChartSettings  # noqa: F401
 from .chart_stack import PlotStack
@@ -69,7 +70,8 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         self._timebase = "device"
         self._paused = False
         self._frozen_end: dict[str, float] | None = None   # packet -> device time
-        self._series: dict[str, _Series] = {}
+        self._series: dict[str, _Series] = {}               # paused: the frozen data
+        self._offsets: dict[str, float] = {}                # live: host − device time (s)
         self._need_fetch = True
         self._render_pending = True
         self._snap_x = True            # paused: the next redraw still shows the whole window
@@ -161,12 +163,20 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
             self._render_pending = True
 
     def refresh(self) -> None:
-        """Fetch (unless paused) and redraw every plot."""
+        """Redraw every plot: live from the store's min/max pyramids, or paused from the
+        data frozen when pausing."""
         t0 = time.perf_counter()
-        if not self._paused or self._need_fetch:
-            self._series = self._fetch()
+        if self._paused:
+            if self._need_fetch:
+                self._series = fetch_series(self.store, self._wanted(), self._window_s,
+                                            self._frozen_end)
+                self._need_fetch = False
+            traces, lo, hi = self._frozen_traces()
+        else:
+            self._series = {}
             self._need_fetch = False
-        self._render()
+            traces, lo, hi = self._live_traces()
+        self._render(traces, lo, hi)
         self._render_pending = False
         end = time.perf_counter()
         self._last_ms = (end - t0) * 1000.0
@@ -174,31 +184,67 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         while end - self._frame_times[0] > 1.0:
             self._frame_times.popleft()
 
-    def _fetch(self) -> dict[str, _Series]:
+    def _wanted(self) -> dict[str, set[str]]:
         wanted: dict[str, set[str]] = {}
         for plot in self.plots:
             for cid in plot.curves:
                 packet, _, name = cid.partition(".")
                 wanted.setdefault(packet, set()).add(name)
-        return fetch_series(self.store, wanted, self._window_s, self._frozen_end)
+        return wanted
 
-    def _live_x_range(self) -> tuple[float, float]:
-        ends = [s.x(self._timebase)[-1] for s in self._series.values()]
-        if ends:
-            end = max(ends)
-        else:
-            end = time.time() if self._timebase == "host" else 0.0
-        return end - self._window_s, end
+    def _bins(self) -> int:
+        return max(64, int(self.plots[0].plot_width()))
 
-    def _render(self) -> None:
-        master = self.plots[0]
-        if self._paused and not self._snap_x:
-            lo, hi = master.x_range()
-        else:
-            lo, hi = self._live_x_range()
-            master.getPlotItem().setXRange(lo, hi, padding=0)
-            self._snap_x = False
-        bins = max(64, int(master.plot_width()))
+    def _set_x_range(self, lo: float, hi: float) -> None:
+        self.plots[0].getPlotItem().setXRange(lo, hi, padding=0)
+        self._snap_x = False
+
+    def _live_traces(self) -> tuple[dict[str, _Trace], float, float]:
+        """The newest window of every packet shown, min/max per bin from the pyramids
+        (only the samples that arrived since the last frame are reduced)."""
+        host = self._timebase == "host"
+        ends, offsets = [], {}
+        for packet in self._wanted():
+            ring = self.store.rings.get(packet)
+            newest = ring.newest_time() if ring is not None else None
+            if newest is None:
+                continue
+            offsets[packet] = ring.host_offset(self._window_s) if host else 0.0
+            ends.append(newest + offsets[packet])
+        end = max(ends) if ends else (time.time() if host else 0.0)
+        lo, hi = end - self._window_s, end
+        self._set_x_range(lo, hi)
+        bins = self._bins()
+        traces = {}
+        for packet, names in self._wanted().items():
+            if packet not in offsets:
+                continue
+            off = offsets[packet]
+            # the window starts at its first sample: none older (a live window is
+            # the newest `window_s` seconds, exactly)
+            env = self.store.rings[packet].envelope(sorted(names), lo - off, hi - off, bins,
+                                                    before=False)
+            if env is not None:
+                traces[packet] = _Trace(env.x + off if off else env.x, env.values, env.per,
+                                        env.breaks, env.gap_times + off, env.gap_sizes)
+        self._offsets = offsets
+        return traces, lo, hi
+
+    def _frozen_traces(self) -> tuple[dict[str, _Trace], float, float]:
+        """While paused: the frozen data between the plot's edges (zoom and pan freely),
+        binned as the live view bins (aligned to the sample numbers)."""
+        if self._snap_x:
+            ends = [s.x(self._timebase)[-1] for s in self._series.values()]
+            end = max(ends) if ends else (time.time() if self._timebase == "host" else 0.0)
+            self._set_x_range(end - self._window_s, end)
+        lo, hi = self.plots[0].x_range()
+        bins = self._bins()
+        traces = {}
+        for packet, series in self._series.items():
+            traces[packet] = frozen_trace(series, self._timebase, lo, hi, bins)
+        return traces, lo, hi
+
+    def _render(self, traces: dict[str, _Trace], lo: float, hi: float) -> None:
         points, worst = 0, 1
         for plot in self.plots:
             gap_x: dict[str, np.ndarray] = {}
@@ -206,26 +252,19 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
             plot_worst = 1
             for cid, curve in plot.curves.items():
                 packet, _, name = cid.partition(".")
-                series = self._series.get(packet)
-                if series is None or name not in series.values:
-                    curve.setData(_EMPTY, _EMPTY)
+                trace = traces.get(packet)
+                if trace is None or name not in trace.values:
+                    curve.set_points(_EMPTY, _EMPTY, lo, hi)
                     continue
-                x = series.x(self._timebase)
-                i0 = max(int(np.searchsorted(x, lo, side="left")) - 1, 0)
-                i1 = int(np.searchsorted(x, hi, side="right")) + 1
-                xs, ys = x[i0:i1], series.values[name][i0:i1]
+                ys = trace.values[name]
                 scale = plot.units[cid].scale
                 if scale != 1.0:
                     ys = ys * scale
-                gx = series.gap_x(self._timebase)
-                xs, ys = with_gap_breaks(xs, ys, gx)
-                xd, yd, decimated = peak_decimate(xs, ys, bins)
-                if decimated:
-                    plot_worst = max(plot_worst, math.ceil(len(ys) / bins))
-                has_nan = bool(np.isnan(yd).any())
-                curve.setData(xd, yd, connect="finite", skipFiniteCheck=not has_nan)
-                points += len(yd)
-                gap_x[packet], gap_n[packet] = gx, series.gap_sizes
+                xs, ys = insert_breaks(trace.x, ys, trace.breaks)
+                curve.set_points(xs, ys, lo, hi)
+                plot_worst = max(plot_worst, trace.per)
+                points += len(ys)
+                gap_x[packet], gap_n[packet] = trace.gap_x, trace.gap_sizes
             gx = np.concatenate(list(gap_x.values())) if gap_x else np.empty(0)
             gn = np.concatenate(list(gap_n.values())) if gap_n else np.empty(0, dtype=np.int64)
             inside = (gx >= lo) & (gx <= hi)
@@ -271,12 +310,19 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         """The value (display units) of the newest sample at or before x; NaN when that
         sample is more than 1.5 sample periods older than x (a gap, or no data yet)."""
         packet, _, name = channel_id.partition(".")
-        series = self._series.get(packet)
-        if series is None or name not in series.values:
-            return math.nan
-        t = series.x(self._timebase)
-        i = int(np.searchsorted(t, x, side="right")) - 1
         rate = self.dictionary.packet(packet).rate_hz or 1.0
-        if i < 0 or x - t[i] > 1.5 / rate:
+        series = self._series.get(packet)
+        if series is not None and name in series.values:         # paused: the frozen data
+            t = series.x(self._timebase)
+            i = int(np.searchsorted(t, x, side="right")) - 1
+            if i < 0 or x - t[i] > 1.5 / rate:
+                return math.nan
+            return float(series.values[name][i]) * self.unit_of(channel_id).scale
+        ring = self.store.rings.get(packet)
+        if self._paused or ring is None or name not in ring.channels:
             return math.nan
-        return float(series.values[name][i]) * self.unit_of(channel_id).scale
+        offset = self._offsets.get(packet, 0.0) if self._timebase == "host" else 0.0
+        found = ring.sample_at(name, x - offset)
+        if found is None or x - offset - found[0] > 1.5 / rate:
+            return math.nan
+        return found[1] * self.unit_of(channel_id).scale
