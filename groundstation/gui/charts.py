@@ -81,6 +81,8 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         self._points = 0
         self._decimation = 1
         self._cursor_x: float | None = None
+        self._info_at = -1.0                # when the toolbar's figures were last set
+        self._info_paused = False
         self._build_ui()
         self.set_layout([[]])
         self._timer = QTimer(self)
@@ -276,9 +278,14 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         self._points, self._decimation = points, worst
         if self._cursor_x is not None:
             self.set_cursor(self._cursor_x)
-        s = self.stats
-        self.info_label.setText(f"{s.fps:.0f} fps · {s.last_refresh_ms:.1f} ms"
-                                + (" · <b>paused</b>" if self._paused else ""))
+        # The figures twice a second, not every frame: a label whose text changes asks
+        # the window to lay itself out again.
+        now = time.perf_counter()
+        if now - self._info_at >= 0.5 or self._paused != self._info_paused:
+            self._info_at, self._info_paused = now, self._paused
+            s = self.stats
+            self.info_label.setText(f"{s.fps:.0f} fps · {s.last_refresh_ms:.1f} ms"
+                                    + (" · <b>paused</b>" if self._paused else ""))
 
     # ------------------------------------------------------------------ cursor
     def set_cursor(self, x: float | None) -> None:
