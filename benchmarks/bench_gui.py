@@ -27,6 +27,12 @@ with Session.connect_address (the first simulator is stopped: a real rig is one 
 Run: QT_QPA_PLATFORM=offscreen .venv/bin/python benchmarks/bench_gui.py [--minutes 10]
      [--burst-seconds 10]
 Writes benchmarks/results/gui.json.
+
+Before and after in one run: --before REV [--rounds N] checks REV out into a temporary
+git worktree and runs the whole benchmark N times (default 2) for each side, in fresh
+processes, alternating which goes first; the window's package is imported from the
+worktree for REV (PYTHONPATH), this script is the same for both.  Prints the medians
+side by side and writes benchmarks/results/gui_before_after.json.
 """
 
 from __future__ import annotations
@@ -38,6 +44,8 @@ import platform
 import resource
 import shutil
 import signal
+import statistics
+import subprocess
 import sys
 import tempfile
 import threading
@@ -447,8 +455,10 @@ class Bench:
             self.session.stop_recording()          # blocks until the writer closed the file
             status = rec.status()
             self._discarded_before += rec.discarded_blocks
+        import groundstation
         return {
             "machine": machine(),
+            "package": str(Path(groundstation.__file__).parent),
             "window": [w.width(), w.height()],
             "layout": LAYOUT,
             "window_s": WINDOW_S,
@@ -537,6 +547,91 @@ def print_table(res: dict) -> None:
           f"{(rec['bytes'] or 0) / 1e6:.1f} MB, discarded blocks {rec['discarded_blocks']}")
 
 
+# ---------------------------------------------------------------------- before / after
+COMPARED = [   # (label, key, format)
+    ("chart fps mean", "fps_mean", ".1f"),
+    ("refresh() CPU ms p50", "refresh_cpu_ms_p50", ".2f"),
+    ("GUI thread CPU ms per frame", "gui_thread_cpu_ms_per_frame", ".2f"),
+    ("GUI process CPU % of a core", "gui_cpu_percent", ".0f"),
+    ("GUI thread CPU % of a core", "gui_thread_cpu_percent", ".0f"),
+    ("loop latency ms p50", "latency_ms_p50", ".1f"),
+    ("loop latency ms p99", "latency_ms_p99", ".1f"),
+    ("loop latency ms max", "latency_ms_max", ".1f"),
+    ("HIGH_RATE dropped (link + tick gaps)", "dropped", "d"),
+    ("recorder blocks discarded", "recorder_discarded_blocks", "d"),
+    ("ticks per wall s", "ticks_per_wall_s", ".0f"),
+    ("other processes CPU %", "other_processes_cpu_percent", ".0f"),
+]
+
+
+def _median(runs: list[dict], phase: str, key: str):
+    vals = []
+    for r in runs:
+        ph = r[phase]
+        v = ph["link_dropped"] + ph["tick_gaps"] if key == "dropped" else ph.get(key)
+        if v is not None:
+            vals.append(v)
+    return statistics.median(vals) if vals else None
+
+
+def before_after(args) -> int:
+    """Run the benchmark for REV (a temporary worktree) and for this checkout, alternately."""
+    root = HERE.parent
+    tmp = Path(tempfile.mkdtemp(prefix="gs-bench-gui-ba-"))
+    tree = tmp / "before"
+    subprocess.run(["git", "worktree", "add", "--detach", str(tree), args.before], cwd=root,
+                   check=True, capture_output=True)
+    runs: dict[str, list[dict]] = {"before": [], "after": []}
+    loads = []
+    try:
+        for k in range(args.rounds):
+            order = ("before", "after") if k % 2 == 0 else ("after", "before")
+            for side in order:
+                src = tree if side == "before" else root
+                out = tmp / f"{side}_{k}.json"
+                cmd = [sys.executable, str(Path(__file__).resolve()), "--minutes", str(args.minutes),
+                       "--burst-seconds", str(args.burst_seconds), "--warmup-seconds",
+                       str(args.warmup_seconds), "--no-progress", "--out", str(out)]
+                env = dict(os.environ, PYTHONPATH=str(src), QT_QPA_PLATFORM="offscreen")
+                loads.append(os.getloadavg())
+                print(f"round {k + 1}/{args.rounds}: {side} ({args.before if side == 'before' else 'this checkout'})",
+                      flush=True)
+                done = subprocess.run(cmd, cwd=src, env=env, capture_output=True, text=True)
+                if done.returncode != 0 or not out.exists():
+                    raise SystemExit(f"{side} run failed (exit {done.returncode}):\n{done.stderr[-2000:]}")
+                res = json.loads(out.read_text())
+                if not res["package"].startswith(str(src)):
+                    raise SystemExit(f"{side} imported {res['package']}, not {src}")
+                runs[side].append(res)
+    finally:
+        subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=root,
+                       capture_output=True)
+        shutil.rmtree(tmp, ignore_errors=True)
+    loads.append(os.getloadavg())
+    one = [l[0] for l in loads]
+    print(f"\nGUI benchmark, before ({args.before}) and after, median of {args.rounds} runs each, "
+          f"alternating - {runs['after'][0]['machine']}")
+    print(f"steady {args.minutes:g} min at 1200 Hz, burst {args.burst_seconds:g} s at 10x; "
+          f"1-min load average at the starts of the runs {min(one):.1f} to {max(one):.1f}\n")
+    print(f"{'':40} {'before':>9} {'after':>9}   {'before':>9} {'after':>9}")
+    print(f"{'':40} {'steady':>9} {'steady':>9}   {'burst':>9} {'burst':>9}")
+    table = {}
+    for label, key, spec in COMPARED:
+        cells = [_median(runs[side], phase, key) for phase in ("steady", "burst")
+                 for side in ("before", "after")]
+        table[label] = dict(zip(("steady_before", "steady_after", "burst_before", "burst_after"), cells))
+        txt = [fmt(c if spec != "d" or c is None else int(c), spec) for c in cells]
+        print(f"{label:40} {txt[0]:>9} {txt[1]:>9}   {txt[2]:>9} {txt[3]:>9}")
+    out = Path(args.out).with_name("gui_before_after.json")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({"before": args.before, "rounds": args.rounds,
+                               "minutes": args.minutes, "burst_seconds": args.burst_seconds,
+                               "loadavg_at_starts": loads, "medians": table, "runs": runs},
+                              indent=2) + "\n")
+    print(f"\nwritten to {out}")
+    return 0
+
+
 # ---------------------------------------------------------------------- main
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -550,7 +645,12 @@ def main() -> int:
     p.add_argument("--no-progress", dest="progress", action="store_false",
                    help="no progress line every minute")
     p.add_argument("--out", default=str(HERE / "results" / "gui.json"))
+    p.add_argument("--before", metavar="REV", default=None,
+                   help="also run this git revision (temporary worktree), alternating")
+    p.add_argument("--rounds", type=int, default=2, help="runs per side with --before (default 2)")
     args = p.parse_args()
+    if args.before:
+        return before_after(args)
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setApplicationName("groundstation-bench")
