@@ -1,27 +1,38 @@
 """How fast a campaign runs on the simulated testbed with --fast, recording on.
 
-Side by side, in one run:
+Side by side, in one run, repeated (--rounds, interleaved; medians):
 
   ours       Testbed(fast=True): relative Design #2 uploaded, a 60 s band-limited current
              profile played open loop and a 60 s dwell, both recorded - device seconds
-             per wall second
+             per wall second; pipelined (clock.FastPacing(): several 0.75 s chunks in
+             flight, many frames per datagram, device held between steps)
+  one chunk  the same with the pacing before issue 19: one chunk in flight, one frame per
+             datagram, the device running in real time between steps
   baseline   the real-time simulator (what a rig, or `--device sim` without --fast, takes:
              1 device second per wall second, by definition)
   limit      the simulator alone in fast mode, every frame encoded, nothing sent, received
              or recorded (the same engine and firmware: bench_sim.py's figure)
 
-Run: .venv/bin/python benchmarks/bench_campaign.py
+Where the wall time goes (--profile): per phase, the simulator's own time (engine,
+firmware, frame encoding), sending, and the clock's waits for credits.
+
+Run: .venv/bin/python benchmarks/bench_campaign.py [--rounds 3] [--profile]
 """
 
 from __future__ import annotations
 
+import argparse
+import os
+import statistics
 import tempfile
 import time
+from collections import Counter
 from pathlib import Path
 
 from common import machine, save
 
 from groundstation import Testbed
+from groundstation.clock import ONE_CHUNK_IN_FLIGHT, FastPacing
 from groundstation.dictionary import load_dictionary
 from groundstation.sim.device import SimulatedDevice
 from groundstation.sim.firmware import Firmware
@@ -46,38 +57,99 @@ def simulator_alone(seconds: float) -> float:
     return seconds / (time.perf_counter() - t0)
 
 
-def main() -> None:
-    print(f"campaign benchmark - {machine()}")
-    with tempfile.TemporaryDirectory() as tmp:
-        with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=True,
-                     log_folder=tmp, history=Path(tmp) / "history") as tb:
-            tb.upload_design(ROOT / "profiles" / "controllers" / "relative_design2.toml")
-            tb.start_recording("bench")
+class _Timers:
+    """Wall time inside the device's simulate and send, for --profile (wraps the methods
+    of one SimulatedDevice instance)."""
+
+    def __init__(self, device) -> None:
+        self.t: Counter = Counter()
+        for name in ("_simulate", "_send_telemetry"):
+            fn = getattr(device, name)
+            setattr(device, name, self._timed(fn, name))
+
+    def _timed(self, fn, name):
+        def wrapper(*a, **k):
             t0 = time.perf_counter()
-            result = tb.play(PROFILE, mode="OPEN_LOOP")
-            t_play = time.perf_counter() - t0
-            t0 = time.perf_counter()
-            tb.dwell(60.0)
-            t_dwell = time.perf_counter() - t0
-            rec = tb.stop_recording()
+            try:
+                return fn(*a, **k)
+            finally:
+                self.t[name] += time.perf_counter() - t0
+        return wrapper
+
+    def take(self, clock) -> dict[str, float]:
+        out = {"simulate_s": self.t["_simulate"], "send_s": self.t["_send_telemetry"],
+               "clock_waits_s": clock.waited_s}
+        self.t.clear()
+        clock.waited_s = 0.0
+        return out
+
+
+def campaign(tmp: str, pacing: FastPacing, between_steps: str, profile: bool) -> dict:
+    with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=True,
+                 log_folder=tmp, history=Path(tmp) / "history", pacing=pacing,
+                 between_steps=between_steps) as tb:
+        timers = _Timers(tb._device) if profile else None
+        tb.upload_design(ROOT / "profiles" / "controllers" / "relative_design2.toml")
+        tb.start_recording("bench")
+        if timers:
+            timers.take(tb.clock)
+        t0 = time.perf_counter()
+        result = tb.play(PROFILE, mode="OPEN_LOOP")
+        t_play = time.perf_counter() - t0
+        prof_play = timers.take(tb.clock) if timers else {}
+        t0 = time.perf_counter()
+        tb.dwell(60.0)
+        t_dwell = time.perf_counter() - t0
+        prof_dwell = timers.take(tb.clock) if timers else {}
+        rec = tb.stop_recording()
     device_play = result.sample_count / 1200.0
-    ours_play, ours_dwell = device_play / t_play, 60.0 / t_dwell
-    limit = simulator_alone(60.0)
-    res = {"machine": machine(), "profile_device_s": device_play, "profile_wall_s": t_play,
-           "dwell_wall_s": t_dwell, "ours_play_x_realtime": ours_play,
-           "ours_dwell_x_realtime": ours_dwell, "simulator_alone_x_realtime": limit,
-           "recorded_frames": rec["frames"], "dropped": rec["dropped"],
-           "discarded_blocks": rec["discarded_blocks"]}
-    print(f"\nfast campaign on the simulated testbed, recording on ({rec['frames']} frames, "
-          f"{rec['dropped']} dropped, {rec['discarded_blocks']} blocks discarded):")
-    print(f"  ours, playing a {device_play:.0f} s profile (upload, arm, play, disarm): "
-          f"{t_play:5.2f} s wall = {ours_play:5.1f}x real time")
-    print(f"  ours, a 60 s dwell:                                        {t_dwell:5.2f} s wall = "
-          f"{ours_dwell:5.1f}x real time")
-    print("  baseline, real-time simulator or a rig:                             1.0x real time")
-    print(f"  limit, the simulator alone (nothing sent or recorded):          {limit:6.1f}x real time "
-          f"(ours = {ours_dwell / limit:.2f} of it)")
+    return {"play_x": device_play / t_play, "dwell_x": 60.0 / t_dwell, "play_wall_s": t_play,
+            "dwell_wall_s": t_dwell, "profile_device_s": device_play, "frames": rec["frames"],
+            "dropped": rec["dropped"], "discarded_blocks": rec["discarded_blocks"],
+            "profile_play": prof_play, "profile_dwell": prof_dwell}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=3)
+    ap.add_argument("--profile", action="store_true", help="where the wall time goes, per phase")
+    args = ap.parse_args()
+    print(f"campaign benchmark - {machine()}, load average {os.getloadavg()[0]:.1f} at the start")
+    ways = {"pipelined": (FastPacing(), "held"), "one chunk": (ONE_CHUNK_IN_FLIGHT, "realtime")}
+    runs: dict[str, list[dict]] = {k: [] for k in ways}
+    limits: list[float] = []
+    for r in range(args.rounds):
+        limits.append(simulator_alone(60.0))
+        for name, (pacing, between) in ways.items():
+            with tempfile.TemporaryDirectory() as tmp:
+                runs[name].append(campaign(tmp, pacing, between, args.profile))
+            x = runs[name][-1]
+            print(f"  round {r + 1} {name:9s}: dwell {x['dwell_x']:6.1f}x, profile {x['play_x']:6.1f}x, "
+                  f"simulator alone {limits[-1]:6.1f}x; {x['frames']} frames, {x['dropped']} dropped, "
+                  f"{x['discarded_blocks']} discarded"
+                  + (f"; dwell {x['dwell_wall_s']:.2f} s = {_fmt(x['profile_dwell'])}; profile "
+                     f"{x['play_wall_s']:.2f} s = {_fmt(x['profile_play'])}" if args.profile else ""))
+    limit = statistics.median(limits)
+    res: dict = {"machine": machine(), "load_average_end": os.getloadavg(), "rounds": args.rounds,
+                 "simulator_alone_x_realtime": limit, "simulator_alone_rounds": limits}
+    print(f"\nmedians of {args.rounds} rounds, recording on (load average now "
+          f"{os.getloadavg()[0]:.1f}):")
+    print(f"  limit, the simulator alone (nothing sent or recorded): {limit:6.1f}x real time")
+    for name, xs in runs.items():
+        dwell = statistics.median(x["dwell_x"] for x in xs)
+        play = statistics.median(x["play_x"] for x in xs)
+        ok = all(x["dropped"] == 0 and x["discarded_blocks"] == 0 for x in xs)
+        res[name] = {"dwell_x_realtime": dwell, "play_x_realtime": play, "runs": xs,
+                     "dwell_ratio_to_limit": dwell / limit, "play_ratio_to_limit": play / limit}
+        print(f"  {name:9s}: 60 s dwell {dwell:6.1f}x ({dwell / limit:.2f} of the limit), 60 s "
+              f"profile (upload, arm, play, disarm) {play:6.1f}x ({play / limit:.2f}); "
+              f"{'0 dropped, 0 discarded' if ok else 'FRAMES LOST'}")
+    print("  baseline, real-time simulator or a rig:                  1.0x real time")
     print(f"written to {save('campaign', res)}")
+
+
+def _fmt(p: dict) -> str:
+    return ", ".join(f"{k[:-2]} {v:.2f} s" for k, v in p.items())
 
 
 if __name__ == "__main__":

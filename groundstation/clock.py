@@ -2,15 +2,31 @@
 fast mode, as fast as the simulator, the link and the recorder can go.
 
 `WallClock.advance(seconds)` sleeps (in short steps, so an abort or a lost link ends the
-wait at once).  `SteppedClock` drives a manually paced SimulatedDevice:
+wait at once).  `SteppedClock` drives a manually paced SimulatedDevice (in this process):
 
-- while a script is *not* in advance() (sending commands, uploading a table, waiting
-  for an instrument) an idle thread runs the device at the real-time rate, so
-  HOUSEKEEPING, heartbeats and the watchdog behave exactly as on a rig;
-- advance() runs the device in chunks as fast as it can, and after each chunk waits
-  until the host has received the chunk's last frame (flow control: nothing is dropped
-  and a recording keeps up) and sends a HEARTBEAT (the watchdog counts device time, and
-  the host's own heartbeat thread runs in wall time, far too rarely for a fast clock).
+- advance() runs the device in chunks of 0.75 s as fast as it can, with flow control by
+  credits: at most `FastPacing.in_flight` chunks whose frames the host has not yet all
+  received, and nothing new while the recorder's queue to its writer is more than a
+  quarter full - so nothing is dropped and the recorder never discards a block, while
+  the simulator, the receiver and the writer work at the same time.  HIGH_RATE frames
+  travel many to a datagram.  advance() returns when every frame it caused is received.
+- heartbeats in device time: after every chunk the device counts the host as heard at
+  the chunk's last tick (what a HEARTBEAT sent then would do); the host's own heartbeat
+  thread runs in wall time, far too rarely for a fast clock.
+- between steps (`between_steps="held"`, the default) device time stands still, except
+  that a command runs the control period it takes effect in (its state then reaches the
+  host in HIGH_RATE), a commit confirmed in HOUSEKEEPING runs to the end of the
+  housekeeping period (at most 0.1 s), and a recording opens with one period.  Keep-alives,
+  reads and the blocks of a transfer, answered in full, run nothing.  Device time then depends only on what
+  the script does, never on how fast the host does it: a fast run is tick-repeatable.
+  `between_steps="realtime"` is the older behaviour: an idle thread runs the device at
+  the real-time rate while the script is not in advance().
+- fast_forward() (a profile playing to its end while the script waits on the device):
+  held, the device runs chunks flat out while a profile plays; realtime, as long as
+  the block lasts.
+- `until` (a host-side predicate on telemetry) is evaluated on whole chunks, each fully
+  received first; `device_until` (a predicate on the in-process device) after each
+  chunk without waiting - both end an advance at the same tick however fast it runs.
 """
 
 from __future__ import annotations
@@ -18,6 +34,8 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections import deque
+from dataclasses import dataclass
 from typing import Callable, Iterator
 
 from .errors import GroundStationError, LinkLostError
@@ -25,8 +43,36 @@ from .errors import GroundStationError, LinkLostError
 #: device periods per chunk of a fast advance: 0.75 s, inside the 1 s watchdog even
 #: counting the HEARTBEAT's own round trip
 CHUNK_TICKS = 900
-#: how long one chunk's frames may take to arrive before the link is declared stalled
+#: how long the host may make no progress on a chunk's frames (or the recorder on its
+#: queue) before the link is declared stalled
 FLOW_TIMEOUT_S = 10.0
+#: the recorder's queue to its writer may be this full before the clock waits for it
+RECORDER_QUEUE_LIMIT = 0.25
+
+
+@dataclass(frozen=True)
+class FastPacing:
+    """How a SteppedClock paces the device against the host.
+
+    in_flight        chunks whose frames the host has not all received yet, at most (1:
+                     each chunk waits for the previous one's frames - the pacing before
+                     issue 19)
+    datagram_bytes   HIGH_RATE frames per datagram up to this size (0: one frame each,
+                     as a rig sends them)
+    """
+
+    in_flight: int = 4
+    datagram_bytes: int = 32768
+
+    def __post_init__(self) -> None:
+        if self.in_flight < 1:
+            raise ValueError(f"in_flight must be >= 1, not {self.in_flight!r}")
+        if self.datagram_bytes < 0:
+            raise ValueError(f"datagram_bytes must be >= 0, not {self.datagram_bytes!r}")
+
+
+#: the pacing before issue 19: one chunk in flight, one frame per datagram
+ONE_CHUNK_IN_FLIGHT = FastPacing(in_flight=1, datagram_bytes=0)
 
 
 class ScriptAborted(GroundStationError):
@@ -74,20 +120,35 @@ class SteppedClock:
 
     fast = True
 
-    def __init__(self, device, client, abort: threading.Event):
+    def __init__(self, device, client, abort: threading.Event, *,
+                 pacing: FastPacing | None = None, between_steps: str = "held",
+                 recorder_backlog: Callable[[], float] | None = None):
+        if between_steps not in ("held", "realtime"):
+            raise ValueError(f"between_steps must be held or realtime, not {between_steps!r}")
         self.device = device
         self.client = client
         self.abort = abort
+        self.pacing = pacing or FastPacing()
+        self.between_steps = between_steps
+        #: the recorder's queue fill (0..1), or None when nothing records
+        self.recorder_backlog = recorder_backlog
         self.rate = device.dictionary.control_rate_hz
         # a chunk's frames arrive all at once: the receiver need not wait for more to gather
         client.telemetry_batch_s = 0.001
         self._last_tick = -1
         self._seen = threading.Condition()
+        self._in_flight: deque[int] = deque()   # last ticks of chunks not yet all received
         client.subscribe(self._on_block)
         self._lock = threading.Lock()          # one of idle / advance runs the device
         self._stop = threading.Event()
         self._fast = threading.Event()         # fast_forward(): the idle thread runs flat out
+        self._commanded = threading.Event()    # held: a command ran (a profile may have started)
         self.error: BaseException | None = None
+        #: wall seconds the clock spent waiting for credits (receiver, recorder): for the
+        #: benchmark's profile
+        self.waited_s = 0.0
+        if between_steps == "held":
+            device.after_commands = self._confirm
         self._idle = threading.Thread(target=self._idle_loop, name="gs-sim-idle-clock", daemon=True)
         self._idle.start()
 
@@ -97,17 +158,25 @@ class SteppedClock:
                 self._last_tick = int(block["tick"][-1])
                 self._seen.notify_all()
 
+    # ------------------------------------------------------------------ running the device
     def _idle_loop(self) -> None:
         period = 0.01
         step = max(1, int(round(self.rate * period)))
+        held = self.between_steps == "held"
         while not self._stop.is_set():
             if self._fast.is_set():
                 with self._lock:
                     try:
-                        self._chunk(CHUNK_TICKS)
+                        ran = self._run(CHUNK_TICKS, self.pacing.in_flight, only_while_playing=held)
                     except BaseException as exc:          # seen by the script at fast_forward's end
                         self.error = exc
                         self._fast.clear()
+                        continue
+                if ran is not None or not held:
+                    continue
+            if held:              # nothing plays yet (or any more): until the next command
+                self._commanded.wait(period)
+                self._commanded.clear()
                 continue
             if self._stop.wait(period):
                 return
@@ -116,18 +185,72 @@ class SteppedClock:
                     return
                 self.device.run_ticks(step)
 
-    def _chunk(self, n: int) -> None:
-        """n periods, their frames received, and a HEARTBEAT (the watchdog counts ticks)."""
-        self.device.run_ticks(n)
-        # the heartbeat's round trip overlaps the frames' way through the receiver
-        self.client.command("HEARTBEAT")
-        self._wait_for(self.device.firmware.tick & 0xFFFFFFFF)
+    def _run(self, n: int, in_flight: int, only_while_playing: bool = False) -> int | None:
+        """n periods once fewer than `in_flight` chunks are unreceived and the recorder
+        keeps up; returns the last tick run (None: nothing ran, no profile playing)."""
+        self._wait_for_credit(in_flight - 1)
+        last = self.device.step(n, datagram_bytes=self.pacing.datagram_bytes,
+                                only_while_playing=only_while_playing)
+        if last is not None:
+            with self._seen:
+                self._in_flight.append(last)
+        return last
 
+    def _confirm(self, housekeeping: bool) -> None:
+        """Held between steps: a command was executed (device lock held) - run the control
+        period it takes effect in, so its state reaches the host in HIGH_RATE; for a
+        command confirmed in HOUSEKEEPING, to the end of the housekeeping period."""
+        every = self.device.housekeeping_divider
+        n = every - self.device.firmware.tick % every if housekeeping else 1
+        last = self.device.step(n, datagram_bytes=self.pacing.datagram_bytes)
+        with self._seen:
+            self._in_flight.append(last)
+        self._commanded.set()
+
+    def _wait_for_credit(self, allowed: int) -> None:
+        """Until at most `allowed` chunks are unreceived and the recorder's queue is below
+        its limit; LinkLostError when nothing moves for FLOW_TIMEOUT_S."""
+        t0 = time.monotonic()
+        deadline = t0 + FLOW_TIMEOUT_S
+        progress = self._last_tick
+        with self._seen:
+            while True:
+                while self._in_flight and self._in_flight[0] <= self._last_tick:
+                    self._in_flight.popleft()
+                backlog = self.recorder_backlog() if self.recorder_backlog is not None else 0.0
+                if len(self._in_flight) <= allowed and backlog <= RECORDER_QUEUE_LIMIT:
+                    break
+                if self._last_tick != progress:
+                    progress, deadline = self._last_tick, time.monotonic() + FLOW_TIMEOUT_S
+                left = deadline - time.monotonic()
+                if left <= 0 or self.client.link_state != "up":
+                    what = (f"tick {self._last_tick} received, {self._in_flight[-1]} sent"
+                            if len(self._in_flight) > allowed else
+                            f"the recorder's queue stays {backlog:.0%} full")
+                    raise LinkLostError(f"telemetry stalled: {what}")
+                # frames wake us; the recorder's writer drains in another process: look again soon
+                self._seen.wait(min(left, 0.1 if len(self._in_flight) > allowed else 0.002))
+        self.waited_s += time.monotonic() - t0
+
+    def drain(self) -> None:
+        """Until the host has received every frame the device sent."""
+        self._wait_for_credit(0)
+
+    def tick_over(self) -> None:
+        """Held between steps: one control period, received (a recording that starts then
+        opens with the device's state, as on a rig whose stream flows anyway)."""
+        if self.between_steps != "held":
+            return
+        with self._lock:
+            self._run(1, 1)
+            self.drain()
+
+    # ------------------------------------------------------------------ the script's verbs
     @contextlib.contextmanager
     def fast_forward(self) -> Iterator[None]:
         """While inside, device time runs as fast as the link allows even though the
         script is not in advance() - for steps that wait on the device themselves (a
-        profile playing to its end)."""
+        profile playing to its end; held between steps: only while a profile plays)."""
         self.error = None
         self._fast.set()
         try:
@@ -139,34 +262,37 @@ class SteppedClock:
         if self.error is not None:
             raise self.error
 
-    def _wait_for(self, tick: int) -> None:
-        deadline = time.monotonic() + FLOW_TIMEOUT_S
-        with self._seen:
-            while self._last_tick < tick:
-                left = deadline - time.monotonic()
-                if left <= 0 or self.client.link_state != "up":
-                    raise LinkLostError(f"telemetry stalled: tick {self._last_tick} received, "
-                                        f"{tick} sent")
-                self._seen.wait(min(left, 0.1))
-
     def advance(self, seconds: float, progress: Callable[[float], None] | None = None,
-                until: Callable[[], bool] | None = None) -> None:
+                until: Callable[[], bool] | None = None,
+                device_until: Callable[[], bool] | None = None) -> None:
+        """`seconds` of device time in chunks, pipelined; `until()` (on the host's
+        telemetry) ends it after a chunk, judged with that chunk fully received (so with
+        one chunk in flight); `device_until()` (on the device) after a chunk, without
+        waiting.  Returns once every frame has been received."""
         total = int(round(seconds * self.rate))
+        in_flight = 1 if until is not None else self.pacing.in_flight
         done = 0
         with self._lock:
             while done < total:
                 if self.abort.is_set():
                     raise ScriptAborted("aborted")
                 n = min(CHUNK_TICKS, total - done)
-                self._chunk(n)
+                self._run(n, in_flight)
                 done += n
                 if progress is not None:
                     progress(done / total)
-                if until is not None and until():
-                    return
+                if until is not None:
+                    self.drain()
+                    if until():
+                        return
+                if device_until is not None and device_until():
+                    break
+            self.drain()
 
     def close(self) -> None:
         self._stop.set()
         self._fast.clear()
         self._idle.join(timeout=15)
+        if getattr(self.device, "after_commands", None) == self._confirm:
+            self.device.after_commands = None
         self.client.unsubscribe(self._on_block)

@@ -212,6 +212,18 @@ class Recorder:
         except queue.Full:
             self.discarded_blocks += 1
 
+    def queue_fill(self) -> float:
+        """The share of the queue to the writer in use (0..1; 0 when not recording): a
+        producer that can wait (the fast simulator's clock) waits while it is high, so
+        no block is ever discarded for a full queue."""
+        inbox = self._inbox
+        if self.state != "recording" or inbox is None:
+            return 0.0
+        try:
+            return inbox.qsize() / self.queue_blocks
+        except (NotImplementedError, OSError, ValueError):  # no sem_getvalue (macOS), closed
+            return 0.0
+
     def record(self, kind: str, record: dict[str, Any], blob: bytes = b"",
                at: float | None = None) -> None:
         """A journal record (command, parameter table, profile, note, ...), any thread."""

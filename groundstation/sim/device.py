@@ -21,6 +21,7 @@ from ..codec import FrameCodec, StreamDeframer
 from ..dictionary import Dictionary, load_dictionary
 from ..errors import LinkLostError, PortInUseError
 from ..link.transports import StreamTransport, TcpStream, listening_socket
+from . import core
 from .firmware import REJECTED, Firmware
 from ..plant.testbed import Testbed
 
@@ -37,6 +38,17 @@ def housekeeping_divider(dictionary: Dictionary) -> int:
         raise ValueError(f"HOUSEKEEPING rate_hz = {rate!r} does not divide the control rate "
                          f"{dictionary.control_rate_hz:g} Hz into whole control periods")
     return divider
+
+
+#: commands whose whole result is in their RESPONSE (keep-alive, identity, the blocks of
+#: a transfer, read-backs): executing one asks for no device time to confirm it
+ANSWERED_IN_FULL = frozenset({"HEARTBEAT", "GET_INFO", "PARAM_BEGIN", "PARAM_WRITE", "PARAM_READ",
+                              "PROFILE_BEGIN", "PROFILE_WRITE"})
+
+
+#: commands the device confirms in HOUSEKEEPING (the active table's CRC, the active
+#: profile): their confirmation needs the rest of the housekeeping period
+CONFIRMED_IN_HOUSEKEEPING = frozenset({"PARAM_COMMIT", "PROFILE_COMMIT"})
 
 
 class _Connection:
@@ -95,6 +107,15 @@ class SimulatedDevice:
         self.base_drive: Callable[[int, int], np.ndarray] | None = None
         #: receives (first_tick, truth array) of every batch: true angles for analysis/tests
         self.truth_sink: Callable[[int, np.ndarray], None] | None = None
+        #: manual pacing: called as after_commands(housekeeping) (device lock held) after a
+        #: block of commands holding any command not ANSWERED_IN_FULL was executed, before
+        #: their answers are sent - the stepped clock's hook for "a command's confirmation
+        #: needs device time"; `housekeeping`: one of them is CONFIRMED_IN_HOUSEKEEPING
+        self.after_commands: Callable[[bool], None] | None = None
+        self._answered_in_full = frozenset(self.dictionary.command(name).opcode
+                                           for name in ANSWERED_IN_FULL)
+        self._confirmed_in_hk = frozenset(self.dictionary.command(name).opcode
+                                          for name in CONFIRMED_IN_HOUSEKEEPING)
         self.tcp_port: int | None = None
         self._t0: float | None = None
         self._ticks_done = 0
@@ -205,17 +226,22 @@ class SimulatedDevice:
         with self._lock:
             if self.pacing == "realtime" and self._t0 is not None:
                 self._catch_up()          # execute at the control-cycle boundary of "now"
+            confirm = housekeeping = False
             for i in range(len(block)):
                 seq = int(block["sequence"][i])
                 token = int(block["session_token"][i])
                 opcode = int(block["opcode"][i])
                 stages = self.firmware.handle_command(seq, token, opcode, block["arguments"][i],
                                                       peer=conn.id)
+                confirm = confirm or opcode not in self._answered_in_full
+                housekeeping = housekeeping or opcode in self._confirmed_in_hk
                 for st in stages:
                     out.append(self._frame("RESPONSE", {
                         "command_sequence": seq, "opcode": opcode, "stage": st.stage,
                         "reason": st.reason, "data": st.data}))
             self._flush_events()
+            if confirm and self.pacing == "manual" and self.after_commands is not None:
+                self.after_commands(housekeeping)
         conn.send(b"".join(out))
 
     def _answer_other_version_connect(self, conn: _Connection, data: bytes) -> None:
@@ -261,14 +287,15 @@ class SimulatedDevice:
             return ("udp", (conn.peer_ip, port))
         return ("stream", conn)
 
-    def _send_telemetry(self, frames: list[bytes], frame_groups: bool) -> None:
+    def _send_telemetry(self, frames: list[bytes], frame_groups: bool,
+                        group: int | None = None) -> None:
         target = self._telemetry_target()
         if target is None or not frames:
             return
         if target[0] == "stream":
             target[1].send(b"".join(frames))
             return
-        step = self.frames_per_datagram if frame_groups else 1
+        step = (group or self.frames_per_datagram) if frame_groups else 1
         for i in range(0, len(frames), step):
             datagram = b"".join(frames[i:i + step])
             if self.datagram_filter is not None:
@@ -301,6 +328,39 @@ class SimulatedDevice:
                 self._send_telemetry(frames, frame_groups=True)
                 self._send_telemetry(hk_frames, frame_groups=False)
             self._flush_events()
+
+    def step(self, n: int, *, datagram_bytes: int = 0, only_while_playing: bool = False
+             ) -> int | None:
+        """The stepped clock's advance (manual pacing): n control periods and their
+        telemetry, HIGH_RATE frames packed `datagram_bytes` to a datagram (0: as
+        `frames_per_datagram` says) and sent after the others.  At the end the host counts as heard at the last tick:
+        the clock that calls this is the host, and it runs the device only while it keeps
+        up with the telemetry (a device-time heartbeat, the same value a HEARTBEAT sent
+        after the periods would leave).  With `only_while_playing`, nothing runs unless a
+        profile is playing (checked under the device lock, so no command can come between).
+        Returns the tick of the last period run, or None when nothing ran."""
+        with self._lock:
+            if only_while_playing and not self.firmware.profile_active:
+                return None
+            frames, hk_frames = self._simulate(n)
+            # HOUSEKEEPING and EVENTs first, HIGH_RATE last: the arrival of the last
+            # HIGH_RATE frame then tells the clock that all of it has arrived (one socket to
+            # one socket keeps the datagrams' order)
+            self._flush_events()
+            if self._telemetry_target() is not None:
+                self._send_telemetry(hk_frames, frame_groups=False)
+                group = max(1, datagram_bytes // len(frames[0])) if datagram_bytes and frames else None
+                self._send_telemetry(frames, frame_groups=True, group=group)
+            self.host_heard()
+            return self.firmware.tick & 0xFFFFFFFF
+
+    def host_heard(self) -> None:
+        """Manual pacing: the session's host was heard now (what any session command does
+        on the firmware); nothing without a session."""
+        with self._lock:
+            fw = self.firmware
+            if fw.session_token is not None:
+                fw.fw[core.FW_LAST_HEARD] = fw.tick
 
     def _simulate(self, n: int) -> tuple[list[bytes], list[bytes]]:
         """n periods -> HIGH_RATE frames (one per period) and HOUSEKEEPING frames (10 Hz).

@@ -112,6 +112,12 @@ class RecordingSlot:
                              "frames": status.frames, "discarded_blocks": rec.discarded_blocks,
                              "state": status.state, "stop_reason": why})
 
+    def backlog(self) -> float:
+        """How full the recorder's queue to its writer is (0..1; 0 when nothing records):
+        the fast clock waits above a limit, so the recorder never discards a block."""
+        rec = self.recorder
+        return rec.queue_fill() if rec is not None else 0.0
+
     def journal(self, kind: str, record: dict, blob: bytes = b"") -> None:
         rec = self.recorder
         if rec is not None:

@@ -39,7 +39,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from ..clock import ScriptAborted, SteppedClock, WallClock
+from ..clock import FastPacing, ScriptAborted, SteppedClock, WallClock
 from ..contracts import BaseMotionInstrument
 from ..dictionary import Dictionary, load_dictionary
 from ..errors import GroundStationError
@@ -75,8 +75,11 @@ class Station:
                  dictionary: Dictionary | None = None,
                  operator: Callable[[str], bool] | None = None,
                  echo: Callable[[str], None] | None = None,
-                 publish: str | None = None, curve_keys: str | None = None):
+                 publish: str | None = None, curve_keys: str | None = None,
+                 pacing: FastPacing | None = None, between_steps: str = "held"):
         self.device_spec = device
+        #: fast only: how the stepped clock paces the device (clock.py)
+        self.pacing, self.between_steps = pacing, between_steps
         #: publish the link for read-only consoles on this endpoint (fanout/, docs/consoles.md)
         self.publish, self.curve_keys = publish, curve_keys
         self.publisher = None
@@ -226,7 +229,11 @@ class Station:
                 resource = self.generator_spec
         self.address = address
         self.echo(f"device {address}" + (f", generator {resource}" if resource else ""))
-        self.client = open_client(self.d, address)
+        # held between steps, the fast device's time passes only when the stepped clock
+        # runs it, and the clock counts the host as heard after every run (device-time
+        # heartbeats): a wall-time heartbeat would only land at random ticks
+        held = self._device is not None and self.between_steps == "held"
+        self.client = open_client(self.d, address, heartbeat=not held)
         self.client.subscribe(self.state)
         if self.publish:               # before CONNECT: viewers see the session begin
             from ..fanout.publisher import Publisher
@@ -234,8 +241,10 @@ class Station:
             self.publisher.attach(self.client, address)
             self.echo(f"publishing on {self.publisher.endpoint}")
         self.client.connect(take_over=self.take_over)
-        self.clock = (SteppedClock(self._device, self.client, self.abort_event) if self._device
-                      else WallClock(self.client, self.abort_event))
+        self.clock = (SteppedClock(self._device, self.client, self.abort_event, pacing=self.pacing,
+                                   between_steps=self.between_steps,
+                                   recorder_backlog=self.recording.backlog)
+                      if self._device else WallClock(self.client, self.abort_event))
         if resource:
             from ..instruments.fg4050 import open_generator
             self.generator = open_generator(resource, testbed=self.testbed)
@@ -438,7 +447,12 @@ class Station:
         """Let `seconds` of device time pass (fast on the fast simulator)."""
         self._check_running()
         # a fault ends the wait at once: the log then ends near the fault, not a minute on
-        self.clock.advance(seconds, progress, until=lambda: self.state.fault)
+        if isinstance(self.clock, SteppedClock):
+            # judged on the device after each chunk: the same tick however fast it runs
+            firmware = self._device.firmware
+            self.clock.advance(seconds, progress, device_until=lambda: bool(firmware.fault))
+        else:
+            self.clock.advance(seconds, progress, until=lambda: self.state.fault)
         self._check_running()
 
     def settle(self, max_seconds: float = 30.0, criteria: StartCriteria | None = None,
@@ -472,7 +486,10 @@ class Station:
     def start_recording(self, name: str, notes: str = "") -> Path:
         if self.recording.active:
             raise ScriptError(f"start_recording '{name}': '{self.recorder.test_name}' is still recording")
-        return self.recording.start(self.client, self.d, self.testbed, self.log_folder, name, notes)
+        path = self.recording.start(self.client, self.d, self.testbed, self.log_folder, name, notes)
+        if isinstance(self.clock, SteppedClock):
+            self.clock.tick_over()          # held device time: the log opens with telemetry
+        return path
 
     def stop_recording(self) -> dict[str, Any]:
         if not self.recording.active:
