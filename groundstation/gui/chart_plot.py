@@ -23,13 +23,19 @@ class _TextSizeCache:
     def __init__(self) -> None:
         self._sizes: dict[tuple, object] = {}
         self._p = None
+        self._font = ""
 
     def wrap(self, p):
         self._p = p
+        self._font = p.font().key()
         return self
 
+    def setFont(self, font) -> None:
+        self._p.setFont(font)
+        self._font = self._p.font().key()
+
     def boundingRect(self, rect, flags, text):
-        key = (self._p.font().key(), rect.width(), rect.height(), int(flags), text)
+        key = (self._font, rect.width(), rect.height(), int(flags), text)
         size = self._sizes.get(key)
         if size is None:
             if len(self._sizes) > self.MAX:
@@ -60,6 +66,9 @@ class _TimeAxis(pg.DateAxisItem):
         self._text_sizes = _TextSizeCache()
         self.host = False
         self.shown = True          # only the bottom plot of the stack labels its time axis
+        # No labels on the finest tick level: they never fit on a strip chart's time axis,
+        # yet every one of them was measured on every scroll step.
+        self.setStyle(maxTextLevel=1)
 
     def generateDrawSpecs(self, p):
         return super().generateDrawSpecs(self._text_sizes.wrap(p))
