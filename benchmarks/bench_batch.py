@@ -23,6 +23,10 @@ three modes are compared: a speed-up cannot hide a different answer.
   per-log time      serial wall time / logs
   per-log overhead  (dask-1 wall time - serial wall time) / logs: what one task costs
                     beyond the analysis itself (scheduling, the row's trip back)
+  CPU time          of every process that worked: this one (the serial loop; or the
+                    scheduler and client) and each worker (client.run before and after).
+                    On a shared machine the wall times swing by 2x between runs; the
+                    CPU seconds much less, so the per-log CPU overhead is the steadier figure
 
 Run: .venv/bin/python benchmarks/bench_batch.py [--logs 200] [--seconds 60] [--repeat 2]
 """
@@ -37,7 +41,15 @@ import sys
 import time
 from pathlib import Path
 
-from common import machine, save
+# The serial loop gets the thread settings dask.distributed gives its worker processes
+# (distributed.nanny.pre-spawn-environ): one BLAS/OpenMP thread.  Left at OpenBLAS's
+# default (a thread per core), the same loop measured 160-200 ms of CPU per log against
+# 77 ms with one thread, the extra threads spinning on small products on a busy machine,
+# and the comparison would be of BLAS threading rather than of Dask.  Set before numpy.
+for _var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+from common import machine, save  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 CACHE = Path(__file__).resolve().parent / "cache" / "batch"
@@ -135,10 +147,15 @@ def generate(n_logs: int, seconds: float) -> dict:
             "generation_s": round(time.perf_counter() - t0, 1) if made else None}
 
 
-def timed(fn) -> tuple[float, object]:
-    t0 = time.perf_counter()
+def timed(fn) -> tuple[float, float, object]:
+    """(wall s, CPU s of this process, fn's result)."""
+    t0, c0 = time.perf_counter(), time.process_time()
     out = fn()
-    return time.perf_counter() - t0, out
+    return time.perf_counter() - t0, time.process_time() - c0, out
+
+
+def _cpu_s() -> float:
+    return time.process_time()
 
 
 def _warm_worker() -> None:
@@ -175,13 +192,17 @@ def main() -> None:
     analyze_one(paths[0], options, known.get(str(paths[0])))     # serial imports paid
 
     walls: dict[str, list[float]] = {"serial": [], "dask-1": [], "dask-2": []}
+    # CPU seconds of every process that worked (this one, and each worker): on a machine
+    # shared with other work the wall time swings by 2x from run to run, CPU time much less
+    cpus: dict[str, list[float]] = {"serial": [], "dask-1": [], "dask-2": []}
     starts: dict[str, list[float]] = {"dask-1": [], "dask-2": []}
     tables = {}
     for rep in range(args.repeat):
-        wall, rows = timed(lambda: run_serial(paths, options, known))
+        wall, cpu, rows = timed(lambda: run_serial(paths, options, known))
         walls["serial"].append(wall)
+        cpus["serial"].append(cpu)
         tables["serial"] = rows
-        print(f"  [{rep + 1}] serial  {wall:7.2f} s", flush=True)
+        print(f"  [{rep + 1}] serial  {wall:7.2f} s (CPU {cpu:.2f} s)", flush=True)
         for workers in (1, 2):
             name = f"dask-{workers}"
             t0 = time.perf_counter()
@@ -189,8 +210,12 @@ def main() -> None:
                 client.wait_for_workers(workers)
                 client.run(_warm_worker)
                 starts[name].append(time.perf_counter() - t0)
-                wall, rows = timed(lambda: run_on(client, paths, options, known))
+                before = client.run(_cpu_s)
+                wall, cpu, rows = timed(lambda: run_on(client, paths, options, known))
+                after = client.run(_cpu_s)
             walls[name].append(wall)
+            # this process holds the scheduler and the client: its CPU counts too
+            cpus[name].append(cpu + sum(after[w] - before[w] for w in after))
             tables[name] = rows
             print(f"  [{rep + 1}] {name}  {wall:7.2f} s (cluster start "
                   f"{starts[name][-1]:.2f} s)", flush=True)
@@ -209,6 +234,7 @@ def main() -> None:
     frames = [r["frames"] for r in tables["serial"] if r["frames"] is not None]
     results = {
         "machine": machine(),
+        "blas_threads_serial": os.environ["OPENBLAS_NUM_THREADS"],
         "load_average_at_end": [round(x, 2) for x in os.getloadavg()],
         "logs": n, "log_seconds": args.seconds,
         "errors": sum(bool(r["error"]) for r in tables["serial"]),
@@ -221,6 +247,10 @@ def main() -> None:
         "cluster_start_s": {k: round(min(v), 3) for k, v in starts.items()},
         "per_log_ms": {k: round(v / n * 1e3, 2) for k, v in best.items()},
         "per_log_overhead_ms": round((best["dask-1"] - best["serial"]) / n * 1e3, 2),
+        "cpu_s": {k: round(min(v), 3) for k, v in cpus.items()},
+        "all_cpu_s": {k: [round(x, 3) for x in v] for k, v in cpus.items()},
+        "per_log_cpu_ms": {k: round(min(v) / n * 1e3, 2) for k, v in cpus.items()},
+        "per_log_overhead_cpu_ms": round((min(cpus["dask-1"]) - min(cpus["serial"])) / n * 1e3, 2),
         "speedup_vs_serial": {k: round(best["serial"] / best[k], 3) for k in ("dask-1", "dask-2")},
         "speedup_with_start_vs_serial": {
             k: round(best["serial"] / (best[k] + min(starts[k])), 3) for k in ("dask-1", "dask-2")},
