@@ -62,6 +62,8 @@ class PacketRing:
         self._count = 0                # valid samples (<= capacity)
         self._written = 0              # samples written since clear: the next sample's index
         self._pyramids: dict[str, MinMaxPyramid] = {}   # channels a chart looked at
+        #: counts appends and clears: a chart with nothing new to show need not redraw
+        self.changes = 0
         self.total_frames = 0
         self._sequence = SequenceTracker()
         self._unwrap = TickUnwrapper()
@@ -113,6 +115,7 @@ class PacketRing:
         host = np.broadcast_to(host_all, (len(block),))[a:b] if host_all.ndim == 0 else host_all[a:b]
         columns = {c: block.columns[c][a:b] for c in self.channels}
         with self._lock:
+            self.changes += 1
             self.total_frames += n
             for at, missing in zip(gaps.gap_index.tolist(), gaps.missing.tolist()):
                 self._gaps.append((float(dev[max(0, at - first)]), int(missing)))
@@ -201,6 +204,7 @@ class PacketRing:
     def clear(self) -> None:
         with self._lock:
             self._head = self._count = self._written = 0
+            self.changes += 1
             self._pyramids.clear()
             self.total_frames = 0
             self._sequence = SequenceTracker()

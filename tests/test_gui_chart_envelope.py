@@ -184,3 +184,25 @@ def test_drawn_curve_is_the_brute_force_envelope_as_the_window_scrolls(panel, di
         assert per > 1 or total < 2 * bins
         if t[-1] - 20.0 <= spike_at / RATE <= t[-1]:
             assert np.nanmax(drawn) == np.float32(2.5e-3)
+
+
+def test_nothing_new_nothing_redrawn(panel, dictionary):
+    """The timer redraws a live chart only when a shown packet got data or a setting
+    changed (a stopped link or replay costs no redraws)."""
+    feed = Feeder(dictionary, panel.store)
+    feed(np.arange(2400), error_angle=np.zeros(2400))
+    panel.add_channel("HIGH_RATE.error_angle")
+    calls = []
+    inner = panel.refresh
+    panel.refresh = lambda: (calls.append(1), inner())
+    panel._on_timer()
+    panel._on_timer()
+    assert len(calls) == 1
+    feed(np.arange(2400, 2440), error_angle=np.zeros(40))
+    panel._on_timer()
+    panel._on_timer()
+    assert len(calls) == 2
+    panel.set_window_seconds(2.0)
+    panel._on_timer()
+    assert len(calls) == 3
+    assert panel.plots[0].x_range() == pytest.approx((2439 / RATE - 2.0, 2439 / RATE))

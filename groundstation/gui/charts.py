@@ -1,13 +1,15 @@
 """Strip charts: stacked plots on a shared time axis, pulled from the telemetry store.
 
 The panel owns no data and does no I/O: a `QTimer` (~30 Hz, only while the panel is
-visible) takes a snapshot of the channels on screen from the `TelemetryStore` the
-receiver (or replay) fills, and redraws.  Per redraw and channel: one numpy slice to the
-visible time range, `with_gap_breaks` (a NaN after every sequence gap, so the line
-breaks instead of bridging lost frames), then `peak_decimate` to about two points per
-horizontal pixel (min and max of each pixel column, so a one-sample spike is never
-hidden).  Items are created once and updated with `setData`; gap markers come from a
-fixed pool of `InfiniteLine`s.
+visible) asks the `TelemetryStore` the receiver (or replay) fills for what to draw.  Live,
+each packet's ring answers from its min/max pyramids (`PacketRing.envelope`): the samples
+themselves while there are at most two per horizontal pixel, else the min and max of
+each bin of a power-of-two number of samples, aligned to the sample count, so a
+one-sample spike is never hidden and only the samples that arrived since the last frame
+are reduced.  A NaN point before the first sample after each sequence gap breaks the
+line instead of bridging lost frames.  Curves (`ChartCurve`) are created once and
+updated with `setData` (finite data skip pyqtgraph's finite check); gap markers come
+from a fixed pool of `InfiniteLine`s.
 
 Timebases:
 - "device": seconds since the device booted (the tick counter / 1200 Hz).  Exact,
@@ -17,9 +19,9 @@ Timebases:
   the smallest host−device offset seen in the window: the host clock's reading of
   the sample without queueing delay.  Gaps and the cursor use the same mapping.
 
-Pausing freezes the picture at the newest sample of each packet; the store keeps
-filling, and while paused the time axis can be panned and zoomed over the frozen
-data at full resolution.
+Pausing freezes the picture at the newest sample of each packet: the shown channels are
+copied once, the store keeps filling, and while paused the time axis can be panned and
+zoomed over the frozen data at full resolution (binned as live, `frozen_trace`).
 
 The panel's parts live in modules of their own (every name is still importable from
 here): `chart_stack` (the plots and the channels on them), `chart_settings` (window,
@@ -72,6 +74,7 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         self._frozen_end: dict[str, float] | None = None   # packet -> device time
         self._series: dict[str, _Series] = {}               # paused: the frozen data
         self._offsets: dict[str, float] = {}                # live: host − device time (s)
+        self._drawn_key: tuple | None = None                # live: what the picture shows
         self._need_fetch = True
         self._render_pending = True
         self._snap_x = True            # paused: the next redraw still shows the whole window
@@ -158,7 +161,20 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
             return
         if self._paused and not (self._render_pending or self._need_fetch):
             return
+        if not self._paused and not self._render_pending and self._live_key() == self._drawn_key:
+            return                     # nothing arrived, nothing changed: the picture stands
         self.refresh()
+
+    def _live_key(self) -> tuple | None:
+        """What a live picture depends on besides the settings (which set _render_pending):
+        each shown packet's ring changes, and the width in bins.  None: always redraw."""
+        rings = []
+        for packet in sorted(self._wanted()):
+            ring = self.store.rings.get(packet)
+            rings.append((packet, ring.changes if ring is not None else -1))
+        if not rings and self._timebase == "host":
+            return None                # an empty host-time axis follows the clock
+        return tuple(rings), self._bins()
 
     def _on_x_range_changed(self) -> None:
         if self._paused:                           # re-decimate the frozen data for the new zoom
@@ -177,6 +193,7 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         else:
             self._series = {}
             self._need_fetch = False
+            self._drawn_key = self._live_key()
             traces, lo, hi = self._live_traces()
         self._render(traces, lo, hi)
         self._render_pending = False
