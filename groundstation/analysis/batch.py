@@ -119,8 +119,10 @@ def run_identity(path: str | Path, known: dict[str, Any] | None = None) -> dict[
         profiles: list[str] = []
         for rec in r.journal(["parameter_table", "event", "profile"]):
             d = rec.data if isinstance(rec.data, dict) else {}
-            if rec.kind == "parameter_table" and d.get("source", "").split(" (")[0].endswith(".toml"):
-                design = Path(d["source"].split(" (")[0]).stem    # the last design uploaded
+            # the source of an upload names its design file, then notes in parentheses
+            source = str(d.get("source", "")).split(" (")[0]
+            if rec.kind == "parameter_table" and source.endswith(".toml"):
+                design = Path(source).stem                         # the last design uploaded
             elif rec.kind == "event" and d.get("source") == "generator":
                 m = _BASE_MOTION_ON.match(str(d.get("text", "")))
                 base_motion = m.group(1) if m else base_motion
