@@ -28,10 +28,11 @@ Run: QT_QPA_PLATFORM=offscreen .venv/bin/python benchmarks/bench_gui.py [--minut
      [--burst-seconds 10]
 Writes benchmarks/results/gui.json.
 
-Before and after in one run: --before REV [--rounds N] checks REV out into a temporary
-git worktree and runs the whole benchmark N times (default 2) for each side, in fresh
-processes, alternating which goes first; the window's package is imported from the
-worktree for REV (PYTHONPATH), this script is the same for both.  Prints the medians
+Before and after in one run: --before REV [--after REV2] [--rounds N] checks REV (and
+REV2, else the checkout as it is) out into temporary git worktrees and runs the whole
+benchmark N times (default 2) for each side, in fresh processes, alternating which goes
+first; each side's package is imported from its tree (PYTHONPATH), this script is the
+same for both.  Prints the medians
 side by side and writes benchmarks/results/gui_before_after.json.
 """
 
@@ -581,21 +582,26 @@ def before_after(args) -> int:
     tree = tmp / "before"
     subprocess.run(["git", "worktree", "add", "--detach", str(tree), args.before], cwd=root,
                    check=True, capture_output=True)
+    after_tree = root
+    if args.after:                  # a committed revision, without uncommitted work in the checkout
+        after_tree = tmp / "after"
+        subprocess.run(["git", "worktree", "add", "--detach", str(after_tree), args.after],
+                       cwd=root, check=True, capture_output=True)
     runs: dict[str, list[dict]] = {"before": [], "after": []}
     loads = []
     try:
         for k in range(args.rounds):
             order = ("before", "after") if k % 2 == 0 else ("after", "before")
             for side in order:
-                src = tree if side == "before" else root
+                src = tree if side == "before" else after_tree
                 out = tmp / f"{side}_{k}.json"
                 cmd = [sys.executable, str(Path(__file__).resolve()), "--minutes", str(args.minutes),
                        "--burst-seconds", str(args.burst_seconds), "--warmup-seconds",
                        str(args.warmup_seconds), "--no-progress", "--out", str(out)]
                 env = dict(os.environ, PYTHONPATH=str(src), QT_QPA_PLATFORM="offscreen")
                 loads.append(os.getloadavg())
-                print(f"round {k + 1}/{args.rounds}: {side} ({args.before if side == 'before' else 'this checkout'})",
-                      flush=True)
+                name = args.before if side == "before" else (args.after or "this checkout")
+                print(f"round {k + 1}/{args.rounds}: {side} ({name})", flush=True)
                 done = subprocess.run(cmd, cwd=src, env=env, capture_output=True, text=True)
                 if done.returncode != 0 or not out.exists():
                     raise SystemExit(f"{side} run failed (exit {done.returncode}):\n{done.stderr[-2000:]}")
@@ -604,12 +610,13 @@ def before_after(args) -> int:
                     raise SystemExit(f"{side} imported {res['package']}, not {src}")
                 runs[side].append(res)
     finally:
-        subprocess.run(["git", "worktree", "remove", "--force", str(tree)], cwd=root,
-                       capture_output=True)
+        for t in {tree, after_tree} - {root}:
+            subprocess.run(["git", "worktree", "remove", "--force", str(t)], cwd=root,
+                           capture_output=True)
         shutil.rmtree(tmp, ignore_errors=True)
     loads.append(os.getloadavg())
     one = [l[0] for l in loads]
-    print(f"\nGUI benchmark, before ({args.before}) and after, median of {args.rounds} runs each, "
+    print(f"\nGUI benchmark, before ({args.before}) and after ({args.after or 'this checkout'}), median of {args.rounds} runs each, "
           f"alternating - {runs['after'][0]['machine']}")
     print(f"steady {args.minutes:g} min at 1200 Hz, burst {args.burst_seconds:g} s at 10x; "
           f"1-min load average at the starts of the runs {min(one):.1f} to {max(one):.1f}\n")
@@ -624,7 +631,7 @@ def before_after(args) -> int:
         print(f"{label:40} {txt[0]:>9} {txt[1]:>9}   {txt[2]:>9} {txt[3]:>9}")
     out = Path(args.out).with_name("gui_before_after.json")
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"before": args.before, "rounds": args.rounds,
+    out.write_text(json.dumps({"before": args.before, "after": args.after, "rounds": args.rounds,
                                "minutes": args.minutes, "burst_seconds": args.burst_seconds,
                                "loadavg_at_starts": loads, "medians": table, "runs": runs},
                               indent=2) + "\n")
@@ -647,6 +654,8 @@ def main() -> int:
     p.add_argument("--out", default=str(HERE / "results" / "gui.json"))
     p.add_argument("--before", metavar="REV", default=None,
                    help="also run this git revision (temporary worktree), alternating")
+    p.add_argument("--after", metavar="REV", default=None,
+                   help="with --before: run this revision (a worktree too) instead of the checkout")
     p.add_argument("--rounds", type=int, default=2, help="runs per side with --before (default 2)")
     args = p.parse_args()
     if args.before:
