@@ -20,9 +20,8 @@ def _cmd_record(args) -> int:
     from .dictionary import load_dictionary
 
     from .link import format_snapshot
-    from .logs import Recorder
     from .station.keeper import EXIT_REFUSED, LinkKeeper
-    from .logs.live import attach_recorder
+    from .logs.live import attach_recorder, recorder_from_args
     from .plant.testbed import load_testbed
     from .stop_request import StopRequest
 
@@ -30,13 +29,7 @@ def _cmd_record(args) -> int:
     testbed = load_testbed(args.testbed) if args.testbed else None
     failures: list[str] = []
     with StopRequest() as stop:
-        rec = Recorder(d, args.folder, test_name=args.name, notes=args.notes,
-                       testbed_text=testbed.text if testbed else "",
-                       testbed_name=testbed.name if testbed else "",
-                       testbed_path=str(testbed.path) if testbed else "",
-                       rollover_bytes=int(args.rollover_mb * 1e6) if args.rollover_mb else None,
-                       rollover_seconds=args.rollover_min * 60 if args.rollover_min else None,
-                       on_failure=failures.append)
+        rec = recorder_from_args(d, args, testbed, failures.append)
         path = rec.start()
         print(f"recording to {path}", flush=True)
         keeper = LinkKeeper(d, args.device, args.testbed, take_over=args.take_over,

@@ -71,8 +71,7 @@ def watch_monitor(args, dictionary) -> int:
 def watch_record(args, dictionary) -> int:
     """A normal log of what the viewer decodes, with the commander's command journal
     and link events, and this console's own link statistics (its own gaps)."""
-    from ..logs import Recorder
-    from ..logs.live import attach_recorder
+    from ..logs.live import attach_recorder, recorder_from_args
     from ..plant.testbed import load_testbed
     from ..stop_request import StopRequest
 
@@ -80,13 +79,7 @@ def watch_record(args, dictionary) -> int:
     failures: list[str] = []
     with StopRequest() as stop:
         viewer = open_viewer(args, dictionary)
-        rec = Recorder(dictionary, args.folder, test_name=args.name, notes=args.notes,
-                       testbed_text=testbed.text if testbed else "",
-                       testbed_name=testbed.name if testbed else "",
-                       testbed_path=str(testbed.path) if testbed else "",
-                       rollover_bytes=int(args.rollover_mb * 1e6) if args.rollover_mb else None,
-                       rollover_seconds=args.rollover_min * 60 if args.rollover_min else None,
-                       on_failure=failures.append)
+        rec = recorder_from_args(dictionary, args, testbed, failures.append)
         try:
             path = rec.start()
             print(f"recording to {path}\n{describe(viewer)}", flush=True)

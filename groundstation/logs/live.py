@@ -40,3 +40,16 @@ def attach_recorder(client: DeviceClient, recorder: Recorder) -> Callable[[], No
         client.remove_command_listener(journal_command)
         client.remove_link_listener(journal_link)
     return detach
+
+
+def recorder_from_args(dictionary, args, testbed, on_failure) -> Recorder:
+    """The Recorder that the `record` command's options describe (args.folder, name,
+    notes, rollover_mb, rollover_min) for `testbed` (a loaded Testbed or None): the same
+    for a station's own link and for a watching console."""
+    return Recorder(dictionary, args.folder, test_name=args.name, notes=args.notes,
+                    testbed_text=testbed.text if testbed else "",
+                    testbed_name=testbed.name if testbed else "",
+                    testbed_path=str(testbed.path) if testbed else "",
+                    rollover_bytes=int(args.rollover_mb * 1e6) if args.rollover_mb else None,
+                    rollover_seconds=args.rollover_min * 60 if args.rollover_min else None,
+                    on_failure=on_failure)
