@@ -232,14 +232,9 @@ def _cmd_analyze(args) -> int:
     if args.slope_table:
         _write_slope_tables(Path(args.slope_table), args.logs, extra_results)
     rows = [_row(name, m, error, ex) for (name, m, error), ex in zip(results, extra_results)]
-    if args.json:
-        print(json.dumps(rows, indent=2))
-    elif args.csv:
+    if args.json or args.csv:
         from .analysis.batch_rows import ROW_KEYS
-        w = csv.DictWriter(sys.stdout, fieldnames=ROW_KEYS, lineterminator="\n")
-        w.writeheader()
-        for row in rows:
-            w.writerow({k: "" if v is None else v for k, v in row.items()})
+        _print_rows(rows, ROW_KEYS, args.json)
     else:
         if metrics:
             _print_table(rows, args.metrics, results)
@@ -315,13 +310,8 @@ def _cmd_batch(args) -> int:
     if args.table:
         files = write_table(rows, args.table, TABLE_KEYS)
         print("table: " + ", ".join(str(f) for f in files), file=sys.stderr)
-    if args.json:
-        print(json.dumps(rows, indent=2))
-    elif args.csv:
-        w = csv.DictWriter(sys.stdout, fieldnames=TABLE_KEYS, lineterminator="\n")
-        w.writeheader()
-        for row in rows:
-            w.writerow({k: "" if v is None else v for k, v in row.items()})
+    if args.json or args.csv:
+        _print_rows(rows, TABLE_KEYS, args.json)
     else:
         print(f"{len(rows)} logs, {len(rows) - len(failed)} analysed without error, "
               f"{len(failed)} with errors")
@@ -510,3 +500,14 @@ def _plot(path: Path, spectra, sensor: str) -> None:
     ax_csp.grid(True, which="both", alpha=0.3)
     ax_psd.legend(fontsize="small")
     fig.savefig(path, dpi=120)
+
+
+def _print_rows(rows: list[dict], keys, as_json: bool) -> None:
+    """--json: the rows as a JSON list; --csv: one CSV line per row, empty for None."""
+    if as_json:
+        print(json.dumps(rows, indent=2))
+        return
+    w = csv.DictWriter(sys.stdout, fieldnames=keys, lineterminator="\n")
+    w.writeheader()
+    for row in rows:
+        w.writerow({k: "" if v is None else v for k, v in row.items()})
