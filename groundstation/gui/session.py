@@ -31,6 +31,7 @@ from ..errors import GroundStationError
 from ..link import DeviceClient, open_client
 from ..logs import Recorder, ReplaySource
 from ..logs.live import attach_recorder
+from ..logs.summary import event_markers
 from ..limits import LimitMonitor
 from ..params.upload import ParameterHistory
 from ..profiles import Profile
@@ -609,7 +610,11 @@ class Session(QObject):
         except GroundStationError as exc:
             self.sig_event.emit("ERROR", "replay", str(exc))
             return
-        self.replay_events = self._log_events(path)
+        try:
+            self.replay_events = event_markers(path)
+        except GroundStationError as exc:
+            log.warning("no event markers: %s", exc)
+            self.replay_events = []
         self.store.clear()
         self.limits.acknowledge()
         src.subscribe(self.store)
@@ -619,21 +624,6 @@ class Session(QObject):
         self.replay = src
         self.sig_source.emit("replay", str(path))
         src.play()
-
-    @staticmethod
-    def _log_events(path: str) -> list[tuple[float, int, str]]:
-        """(device time, level, text) of the log's EVENTs: markers for the timeline."""
-        from ..logs import LogReader
-        try:
-            with LogReader(path) as r:
-                if "EVENT" not in r.packets() or not r.n_frames("EVENT"):
-                    return []
-                ev = r.read("EVENT", ["level", "text"])
-                return [(float(t), int(lvl), str(text)) for t, lvl, text in
-                        zip(ev["device_time"], ev["level"], ev["text"])]
-        except GroundStationError as exc:
-            log.warning("no event markers: %s", exc)
-            return []
 
     def close_replay(self) -> None:
         src, self.replay = self.replay, None

@@ -176,3 +176,16 @@ def summarize(r: "LogReader") -> LogInfo:
 
 
 __all__ = ["LogInfo", "PacketSummary", "scan_sequence", "summarize"]
+
+
+def event_markers(path: str | Path) -> list[tuple[float, int, str]]:
+    """(device time, level, text) of a log's EVENT frames: the markers a replay's timeline
+    shows.  Raises the reader's GroundStationError for a log it cannot open."""
+    from .reader import LogReader
+
+    with LogReader(path) as r:
+        if "EVENT" not in r.packets() or not r.n_frames("EVENT"):
+            return []
+        ev = r.read("EVENT", ["level", "text"])
+        return [(float(t), int(lvl), str(text)) for t, lvl, text in
+                zip(ev["device_time"], ev["level"], ev["text"])]
