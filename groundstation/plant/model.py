@@ -20,6 +20,7 @@ simulated response equals the ZOH discretisation of g1(s), g2(s): no integration
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -78,7 +79,20 @@ def continuous_model(tb: Testbed) -> tuple[np.ndarray, np.ndarray]:
 
 
 def discretise(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
-    """Exact zero-order-hold discretisation: expm([[A, B], [0, 0]] h)."""
+    """Exact zero-order-hold discretisation: expm([[A, B], [0, 0]] h).
+
+    Remembered for the last few (A, B, h): the design workbench re-derives its sampled
+    loop on every edit of a controller, while the plant stays the same, and the stiff
+    gyro dynamics make each matrix exponential cost milliseconds.  Callers get copies."""
+    A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
+    Ad, Bd = _discretised(A.shape, A.tobytes(), B.shape, B.tobytes(), float(h))
+    return Ad.copy(), Bd.copy()
+
+
+@functools.lru_cache(maxsize=16)
+def _discretised(a_shape, a_bytes, b_shape, b_bytes, h):
+    A = np.frombuffer(a_bytes).reshape(a_shape)
+    B = np.frombuffer(b_bytes).reshape(b_shape)
     n, m = B.shape
     M = np.zeros((n + m, n + m))
     M[:n, :n], M[:n, n:] = A, B
