@@ -1,5 +1,15 @@
 """One plot of the strip-chart stack: curves, gap markers, cursor line, info text, and
-the time axis that switches between device seconds and wall-clock labels."""
+the time axis that switches between device seconds, wall-clock labels and (live) seconds
+before the newest sample.
+
+Live, the view's x range stays put at -window..0 and the plot's contents move instead:
+every item that sits at a time is placed at its time minus the plot's `origin` (the
+newest sample's time): the curves each, the gap markers and the cursor together in one
+translated layer (so their `value()` stays an absolute time).  A scrolling view range made
+pyqtgraph redo its range bookkeeping for every linked plot and regenerate the time axis's
+ticks and labels on every frame; a fixed one does neither.  Paused, the origin is 0 and
+the axis shows absolute time.  Times in and out of this class (`x_range`, `set_cursor`,
+`sig_mouse_x`, `show_gaps`, curve data) are always absolute."""
 
 from __future__ import annotations
 
@@ -8,9 +18,20 @@ import math
 import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, Signal
-from PySide6.QtWidgets import QMenu, QWidget
+from PySide6.QtWidgets import QGraphicsItem, QMenu, QWidget
 
 from .channel_tree import DisplayUnit, channel_ids_from_text
+from .chart_autoscale import ChartViewBox
+
+
+def _cache_pixels(item: QGraphicsItem) -> None:
+    """Keep the item and all its children as pixmaps, redrawn only when they change.
+    The curves move under the axes' edges, the legend and the info text on every frame,
+    and redrawing those from their text (shaping every glyph again) cost more than the
+    curves themselves."""
+    item.setCacheMode(QGraphicsItem.CacheMode.DeviceCoordinateCache)
+    for child in item.childItems():
+        _cache_pixels(child)
 
 
 class _TextSizeCache:
@@ -59,12 +80,14 @@ class _ValueAxis(pg.AxisItem):
 
 
 class _TimeAxis(pg.DateAxisItem):
-    """Bottom axis: plain seconds in device time, wall-clock labels in host time."""
+    """Bottom axis: plain seconds in device time, wall-clock labels in host time, or
+    (`relative`, a live chart) seconds before the newest sample."""
 
     def __init__(self) -> None:
         super().__init__(orientation="bottom")
         self._text_sizes = _TextSizeCache()
         self.host = False
+        self.relative = False
         self.shown = True          # only the bottom plot of the stack labels its time axis
         # No labels on the finest tick level: they never fit on a strip chart's time axis,
         # yet every one of them was measured on every scroll step.
@@ -74,27 +97,30 @@ class _TimeAxis(pg.DateAxisItem):
         return super().generateDrawSpecs(self._text_sizes.wrap(p))
 
     def tickValues(self, minVal, maxVal, size):
-        if self.host:
+        if self.host and not self.relative:
             return super().tickValues(minVal, maxVal, size)
         return pg.AxisItem.tickValues(self, minVal, maxVal, size)
 
     def tickStrings(self, values, scale, spacing):
-        if self.host:
+        if self.host and not self.relative:
             return super().tickStrings(values, scale, spacing)
         return pg.AxisItem.tickStrings(self, values, scale, spacing)
 
-    def set_host(self, host: bool) -> None:
-        self.host = host
-        if host:
+    def set_mode(self, host: bool, relative: bool) -> None:
+        if (host, relative) == (self.host, self.relative) and self.labelText:
+            return
+        self.host, self.relative = host, relative
+        if relative:
+            self.setLabel("time before the newest sample", units="s")
+        elif host:
             self.setLabel("host time (local)")
         else:
             self.setLabel("device time", units="s")
         self.set_shown(self.shown)
 
     def set_shown(self, shown: bool) -> None:
-        # Hidden outright, not just unlabelled: a shown axis regenerates its ticks on
-        # every scroll step, and three invisible time axes cost more per frame than
-        # drawing all the curves (measured in benchmarks/bench_gui.py).
+        # Hidden outright, not just unlabelled: a hidden plot's axis costs nothing, and
+        # only the bottom plot needs its labels.
         self.shown = shown
         self.setVisible(shown)
         self.showLabel(shown)
@@ -112,10 +138,11 @@ class ChartCurve(pg.PlotCurveItem):
     def __init__(self, pen) -> None:
         super().__init__(pen=pen)
         self._bounds: tuple | None = None
+        self._ybounds: tuple[float, float] | None = None
 
     def set_points(self, x: np.ndarray, y: np.ndarray, lo: float, hi: float) -> None:
         """Draw (x, y); NaN in y breaks the line.  lo, hi: the time window shown."""
-        self._bounds = None
+        self._bounds = self._ybounds = None
         if not len(x):
             self.setData(x, y)
             return
@@ -126,9 +153,14 @@ class ChartCurve(pg.PlotCurveItem):
         else:
             ybounds = (None, None)
         finite = not np.isnan(y).any()
+        self._ybounds = ybounds if ybounds[0] is not None else None
         # Known finite: pyqtgraph skips its own finite check and builds the path in one go.
         self.setData(x, y, connect="all" if finite else "finite", skipFiniteCheck=finite)
         self._bounds = ((float(x[0]), float(x[-1])), ybounds)
+
+    def window_y_bounds(self) -> tuple[float, float] | None:
+        """Lowest and highest y inside the time window (None: no finite points there)."""
+        return self._ybounds
 
     def dataBounds(self, ax, frac=1.0, orthoRange=None):
         if self._bounds is None or frac < 1.0 or ax not in (0, 1):
@@ -154,7 +186,9 @@ class ChartPlot(pg.PlotWidget):
 
     def __init__(self, parent: QWidget | None = None):
         self.time_axis = _TimeAxis()
-        super().__init__(parent, axisItems={"bottom": self.time_axis, "left": _ValueAxis()})
+        super().__init__(parent, viewBox=ChartViewBox(),
+                         axisItems={"bottom": self.time_axis, "left": _ValueAxis()})
+        self.origin = 0.0          # absolute time of view x = 0 (see the module docstring)
         self.setAcceptDrops(True)
         self.setMinimumHeight(90)
         pi = self.getPlotItem()
@@ -162,6 +196,8 @@ class ChartPlot(pg.PlotWidget):
         # time of a scrolling plot (measured); Plot Options → Grid in the menu adds one.
         pi.hideButtons()
         pi.getAxis("left").setWidth(80)
+        for side in ("left", "bottom"):
+            _cache_pixels(pi.getAxis(side))
         self.legend = pi.addLegend(offset=(4, 4), labelTextSize="8pt", brush=(0, 0, 0, 150))
         vb = pi.getViewBox()
         vb.setAutoVisible(y=True)
@@ -172,12 +208,16 @@ class ChartPlot(pg.PlotWidget):
         self.info = pg.TextItem(anchor=(1, 0), color=(235, 235, 235), fill=(0, 0, 0, 140))
         self.info.setParentItem(vb)
         self.info.hide()
+        _cache_pixels(self.info)
         vb.sigResized.connect(self._place_info)
         self._gap_text = self._dec_text = ""
         self._info_html: str | None = None
         self.cursor = pg.InfiniteLine(angle=90, movable=False,
                                       pen=pg.mkPen((255, 255, 255, 150), style=Qt.PenStyle.DotLine))
-        pi.addItem(self.cursor, ignoreBounds=True)
+        # the markers' layer, moved as a whole by set_origin; not counted by autoscale
+        self._markers = pg.ItemGroup()
+        vb.addItem(self._markers, ignoreBounds=True)
+        self.cursor.setParentItem(self._markers)
         self.cursor.hide()
         self._gap_pen = pg.mkPen((255, 50, 50, 200), width=1, style=Qt.PenStyle.DashLine)
         self.gap_lines: list[pg.InfiniteLine] = []
@@ -198,6 +238,7 @@ class ChartPlot(pg.PlotWidget):
         self.units[cid] = unit
         self._names[cid] = name
         self.getPlotItem().addItem(curve)
+        curve.setPos(-self.origin, 0.0)
         self._relabel()
         return curve
 
@@ -225,9 +266,27 @@ class ChartPlot(pg.PlotWidget):
                 label += f" [{self.units[cid].units}]"
             self.legend.addItem(curve, label)
         self.legend.setVisible(bool(self.curves))
+        _cache_pixels(self.legend)
 
-    def set_timebase(self, timebase: str) -> None:
-        self.time_axis.set_host(timebase == "host")
+    def set_time_mode(self, timebase: str, relative: bool) -> None:
+        """Label the time axis for the timebase, relative to the newest sample or not."""
+        self.time_axis.set_mode(timebase == "host", relative)
+
+    def set_origin(self, origin: float) -> None:
+        """Place the plot's contents so that absolute time `origin` is at view x = 0."""
+        if origin == self.origin:
+            return
+        self.origin = origin
+        for curve in self.curves.values():
+            curve.setPos(-origin, 0.0)
+        self._markers.setPos(-origin, 0.0)
+
+    def set_x_view(self, lo: float, hi: float) -> None:
+        """Show view x lo..hi (in view coordinates: absolute time − origin); nothing
+        happens when it is shown already, so a live chart's fixed range costs nothing."""
+        vb = self.getPlotItem().getViewBox()
+        if list(vb.state["viewRange"][0]) != [lo, hi]:
+            vb.setXRange(lo, hi, padding=0)
 
     def set_mouse_x(self, enabled: bool) -> None:
         """Pan/zoom in time only while paused; live, the window follows the data."""
@@ -250,8 +309,9 @@ class ChartPlot(pg.PlotWidget):
         return float(lo), float(hi)
 
     def x_range(self) -> tuple[float, float]:
+        """The time span shown, in absolute time (device s, or host s since the epoch)."""
         lo, hi = self.getPlotItem().getViewBox().viewRange()[0]
-        return float(lo), float(hi)
+        return float(lo) + self.origin, float(hi) + self.origin
 
     def plot_width(self) -> float:
         """Width of the data area in pixels (the decimation target)."""
@@ -264,7 +324,7 @@ class ChartPlot(pg.PlotWidget):
         shown = gap_x[-self.MAX_GAP_MARKERS:]
         while len(self.gap_lines) < len(shown):
             line = pg.InfiniteLine(angle=90, movable=False, pen=self._gap_pen)
-            self.getPlotItem().addItem(line, ignoreBounds=True)
+            line.setParentItem(self._markers)
             self.gap_lines.append(line)
         for line, x in zip(self.gap_lines, shown.tolist()):
             if line.value() != x:
@@ -306,7 +366,7 @@ class ChartPlot(pg.PlotWidget):
     def _on_mouse_moved(self, pos) -> None:
         vb = self.getPlotItem().getViewBox()
         if vb.sceneBoundingRect().contains(pos):
-            self.sig_mouse_x.emit(float(vb.mapSceneToView(pos).x()))
+            self.sig_mouse_x.emit(float(vb.mapSceneToView(pos).x()) + self.origin)
 
     def leaveEvent(self, event) -> None:
         self.sig_mouse_x.emit(None)

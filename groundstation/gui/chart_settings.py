@@ -75,7 +75,7 @@ class ChartSettings:
         self.timebase_combo.setCurrentIndex(TIMEBASES.index(timebase))
         self.timebase_combo.blockSignals(False)
         for plot in self.plots:
-            plot.set_timebase(timebase)
+            plot.set_time_mode(timebase, relative=not self._paused)
         self._cursor_x = None
         self._render_pending = self._snap_x = True
 
@@ -95,6 +95,7 @@ class ChartSettings:
         self.pause_button.blockSignals(False)
         for plot in self.plots:
             plot.set_mouse_x(paused)
+            plot.set_time_mode(self._timebase, relative=not paused)
         self._need_fetch = self._render_pending = self._snap_x = True
         self.sig_paused_changed.emit(paused)
 

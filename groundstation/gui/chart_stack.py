@@ -174,7 +174,7 @@ class PlotStack:
 
     def _new_plot(self, index: int) -> ChartPlot:
         plot = ChartPlot(self)
-        plot.set_timebase(self._timebase)
+        plot.set_time_mode(self._timebase, relative=not self._paused)
         plot.sig_dropped.connect(lambda ids, p=plot: self.drop_channels(ids, self.plots.index(p)))
         plot.sig_menu_about_to_show.connect(self._fill_menu)
         plot.sig_mouse_x.connect(self.set_cursor)

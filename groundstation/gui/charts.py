@@ -19,9 +19,14 @@ Timebases:
   the smallest host−device offset seen in the window: the host clock's reading of
   the sample without queueing delay.  Gaps and the cursor use the same mapping.
 
-Pausing freezes the picture at the newest sample of each packet: the shown channels are
-copied once, the store keeps filling, and while paused the time axis can be panned and
-zoomed over the frozen data at full resolution (binned as live, `frozen_trace`).
+Live, the time axis reads seconds before the newest sample (-window … 0) and stays put
+while the curves move under it (see chart_plot.py: a scrolling axis cost more than the
+curves); the toolbar names the newest sample's time (device seconds, or the wall clock in
+host time), and the cursor read-out gives the absolute time of any point.  Pausing
+freezes the picture at the newest sample of each packet and switches the axis to
+absolute time: the shown channels are copied once, the store keeps filling, and while
+paused the time axis can be panned and zoomed over the frozen data at full resolution
+(binned as live, `frozen_trace`).
 
 The panel's parts live in modules of their own (every name is still importable from
 here): `chart_stack` (the plots and the channels on them), `chart_settings` (window,
@@ -86,6 +91,7 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         self._cursor_x: float | None = None
         self._info_at = -1.0                # when the toolbar's figures were last set
         self._info_paused = False
+        self._newest: float | None = None   # live: absolute time of the newest sample shown
         self._build_ui()
         self.set_layout([[]])
         self._timer = QTimer(self)
@@ -214,9 +220,14 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
     def _bins(self) -> int:
         return max(64, int(self.plots[0].plot_width()))
 
-    def _set_x_range(self, lo: float, hi: float) -> None:
-        self.plots[0].getPlotItem().setXRange(lo, hi, padding=0)
-        self._snap_x = False
+    def _place(self, origin: float, lo: float, hi: float) -> None:
+        """Put absolute time `origin` at view x = 0 on every plot and show lo..hi (view x);
+        the other plots follow the first through their x links."""
+        relative = not self._paused
+        for plot in self.plots:
+            plot.set_time_mode(self._timebase, relative)
+            plot.set_origin(origin)
+        self.plots[0].set_x_view(lo, hi)
 
     def _live_traces(self) -> tuple[dict[str, _Trace], float, float]:
         """The newest window of every packet shown, min/max per bin from the pyramids
@@ -232,7 +243,8 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
             ends.append(newest + offsets[packet])
         end = max(ends) if ends else (time.time() if host else 0.0)
         lo, hi = end - self._window_s, end
-        self._set_x_range(lo, hi)
+        self._place(end, -self._window_s, 0.0)
+        self._newest = end if ends else None
         bins = self._bins()
         traces = {}
         for packet, names in self._wanted().items():
@@ -255,7 +267,8 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         if self._snap_x:
             ends = [s.x(self._timebase)[-1] for s in self._series.values()]
             end = max(ends) if ends else (time.time() if self._timebase == "host" else 0.0)
-            self._set_x_range(end - self._window_s, end)
+            self._place(0.0, end - self._window_s, end)
+            self._snap_x = False
         lo, hi = self.plots[0].x_range()
         bins = self._bins()
         traces = {}
@@ -301,8 +314,18 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         if now - self._info_at >= 0.5 or self._paused != self._info_paused:
             self._info_at, self._info_paused = now, self._paused
             s = self.stats
-            self.info_label.setText(f"{s.fps:.0f} fps · {s.last_refresh_ms:.1f} ms"
-                                    + (" · <b>paused</b>" if self._paused else ""))
+            self.info_label.setText(f"{s.fps:.0f} fps · {s.last_refresh_ms:.1f} ms · "
+                                    + ("<b>paused</b>" if self._paused else
+                                       self._newest_text()))
+
+    def _newest_text(self) -> str:
+        """The live axis's 0: the newest sample's time, as the timebase reads it."""
+        t = self._newest
+        if t is None:
+            return "no data"
+        if self._timebase == "host":
+            return "newest " + time.strftime("%H:%M:%S", time.localtime(t))
+        return f"newest {t:.1f} s"
 
     # ------------------------------------------------------------------ cursor
     def set_cursor(self, x: float | None) -> None:

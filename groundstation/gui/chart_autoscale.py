@@ -1,0 +1,94 @@
+"""The strip charts' y autoscale: a range that sticks.
+
+pyqtgraph's autoscale fits the y range to the data on every frame, so a scrolling chart
+changes its y range (and regenerates its y axis's ticks and labels) nearly every frame,
+and the numbers on the axis jitter.  Here the range is chosen with a margin and snapped
+outward to round values, and it is kept while the data stay inside it and fill at least
+`SHRINK_BELOW` of it: the axis repaints when the data really grew or shrank.
+"""
+
+from __future__ import annotations
+
+import math
+
+import pyqtgraph as pg
+
+#: margin on either side of the data when a range is chosen, as a fraction of the data's span
+MARGIN = 0.1
+#: a range is chosen anew when the data fill less than this fraction of it
+SHRINK_BELOW = 0.4
+#: about this many steps of a round size in a chosen range
+STEPS = 8
+
+
+def nice_step(size: float) -> float:
+    """The smallest of 1, 2, 5 x 10^k that is at least `size` (> 0)."""
+    power = 10.0 ** math.floor(math.log10(size))
+    for m in (1.0, 2.0, 5.0, 10.0):
+        if m * power >= size * (1 - 1e-12):
+            return m * power
+    return 10.0 * power
+
+
+def nice_range(lo: float, hi: float) -> tuple[float, float]:
+    """A range around data lo..hi with a margin, its ends on multiples of a round step.
+    Depends on lo and hi only, so the same data always give the same range."""
+    span = hi - lo
+    if not span > abs(hi) * 1e-12:                  # constant data: a band around them
+        span = abs(lo) * 0.1 if lo else 1.0
+        lo, hi = lo - span / 2, hi + span / 2
+    pad = MARGIN * span
+    step = nice_step((span + 2 * pad) / STEPS)
+    return math.floor((lo - pad) / step) * step, math.ceil((hi + pad) / step) * step
+
+
+def sticky_range(lo: float, hi: float,
+                 shown: tuple[float, float] | None) -> tuple[float, float] | None:
+    """The y range for data lo..hi given the range `shown` now: None to keep it (the data
+    are inside and fill at least SHRINK_BELOW of it), else a new `nice_range`."""
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return None
+    if shown is not None:
+        a, b = shown
+        if a <= lo and hi <= b and hi - lo >= SHRINK_BELOW * (b - a):
+            return None
+    new = nice_range(lo, hi)
+    return None if shown is not None and new == tuple(shown) else new
+
+
+class ChartViewBox(pg.ViewBox):
+    """A ViewBox whose y autoscale (the usual "auto" state, menus included) follows
+    `sticky_range` over the visible curves' bounds; x autoscale is never used by the
+    strip charts and is left to pyqtgraph."""
+
+    def updateAutoRange(self):
+        auto = self.state["autoRange"]
+        if self._updatingRange or auto[0] is not False or not auto[1]:
+            return super().updateAutoRange()
+        self._updatingRange = True
+        try:
+            bounds = self._y_bounds()
+            if bounds is not None:
+                new = sticky_range(bounds[0], bounds[1], tuple(self.state["viewRange"][1]))
+                if new is not None:
+                    self.setRange(yRange=new, padding=0.0, disableAutoRange=False)
+        finally:
+            self._autoRangeNeedsUpdate = False
+            self._updatingRange = False
+
+    def _y_bounds(self) -> tuple[float, float] | None:
+        """Lowest and highest y of the visible items inside the x range shown.  Items that
+        know their window's bounds (`window_y_bounds`) answer directly; otherwise
+        pyqtgraph's general (slower) scan."""
+        lo, hi = math.inf, -math.inf
+        for item in self.addedItems:
+            if not item.isVisible():
+                continue
+            get = getattr(item, "window_y_bounds", None)
+            if get is None:
+                yr = self.childrenBounds(orthoRange=[None, self.state["viewRange"][0]])[1]
+                return None if yr is None else (float(yr[0]), float(yr[1]))
+            b = get()
+            if b is not None:
+                lo, hi = min(lo, b[0]), max(hi, b[1])
+        return (lo, hi) if lo <= hi else None

@@ -1,0 +1,132 @@
+"""The strip chart's axes: a live chart's time axis stays put (seconds before the newest
+sample) while its contents move, pausing shows absolute time, and the y autoscale keeps
+its range while the data stay inside it."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from groundstation.codec import FrameCodec, StreamDeframer
+from groundstation.display_buffers import TelemetryStore
+from groundstation.gui.chart_autoscale import nice_range, nice_step, sticky_range
+from groundstation.gui.charts import StripChartPanel
+
+RATE = 1200.0
+
+
+class Feeder:
+    def __init__(self, dictionary, store):
+        self.codec = FrameCodec(dictionary)
+        self.deframer = StreamDeframer(self.codec)
+        self.store = store
+
+    def __call__(self, seq, **values):
+        data = self.codec.encode("HIGH_RATE", values, seq, seq)
+        for block in self.deframer.feed(data, 1.7e9):
+            self.store(block)
+
+
+@pytest.fixture
+def panel(qtbot, dictionary):
+    p = StripChartPanel(TelemetryStore(dictionary, seconds=30.0), dictionary)
+    qtbot.addWidget(p)
+    p.resize(800, 500)
+    p.show()
+    qtbot.waitExposed(p)
+    p._timer.stop()                    # the test refreshes by hand
+    return p
+
+
+# ---------------------------------------------------------------- y range
+def test_nice_steps_and_ranges():
+    assert [nice_step(x) for x in (0.7, 1.0, 1.3, 2.0, 4.9, 7.0, 0.013)] == \
+        pytest.approx([1.0, 1.0, 2.0, 2.0, 5.0, 10.0, 0.02])
+    lo, hi = nice_range(-1e-3, 1e-3)
+    assert lo < -1e-3 and hi > 1e-3 and lo == pytest.approx(-1.5e-3) and hi == pytest.approx(1.5e-3)
+    assert nice_range(5.0, 5.0)[0] < 5.0 < nice_range(5.0, 5.0)[1]     # constant data
+    assert nice_range(0.0, 0.0)[0] < 0.0 < nice_range(0.0, 0.0)[1]
+
+
+def test_sticky_range_keeps_until_the_data_leave_or_shrink():
+    shown = sticky_range(-1.0, 1.0, None)
+    assert shown is not None and shown[0] < -1.0 and shown[1] > 1.0
+    assert sticky_range(-1.0, 1.0, shown) is None                   # the same data: kept
+    assert sticky_range(-1.05, 0.9, shown) is None                  # a little noise: kept
+    grown = sticky_range(-1.0, 3.0, shown)                           # the data left it
+    assert grown is not None and grown[1] >= 3.0
+    small = sticky_range(-0.1, 0.1, shown)                           # shrank a lot
+    assert small is not None and small[1] - small[0] < 0.5
+    assert sticky_range(math.nan, 1.0, shown) is None
+
+
+def test_autoscaled_y_range_holds_while_the_data_stay_inside(panel, dictionary):
+    feed = Feeder(dictionary, panel.store)
+    panel.add_channel("HIGH_RATE.error_angle")
+    panel.set_window_seconds(5.0)
+    rng = np.random.default_rng(2)
+    total, ranges = 0, []
+    for step in range(60):
+        s = np.arange(total, total + 40)
+        feed(s, error_angle=1e-4 * np.sin(s / 100.0) + 1e-6 * rng.standard_normal(40))
+        total += 40
+        panel.refresh()
+        if total > 1300:                              # a few cycles: the range is set
+            ranges.append(panel.plots[0].y_range())
+    assert len(set(ranges)) == 1
+    lo, hi = ranges[0]
+    assert lo < -1e-4 and hi > 1e-4 and hi - lo < 4e-4
+    feed(np.arange(total, total + 40), error_angle=np.full(40, 5e-4))  # out of the range
+    panel.refresh()
+    assert panel.plots[0].y_range()[1] >= 5e-4
+
+
+# ---------------------------------------------------------------- time axis
+def test_live_time_axis_stays_put_and_times_stay_absolute(panel, dictionary):
+    feed = Feeder(dictionary, panel.store)
+    panel.add_channel("HIGH_RATE.error_angle")
+    panel.add_channel("HIGH_RATE.encoder_outer", 1)
+    panel.set_window_seconds(2.0)
+    feed(np.arange(0, 1200), error_angle=np.zeros(1200), encoder_outer=np.zeros(1200))
+    panel.refresh()
+    changes = []
+    for plot in panel.plots:
+        plot.getPlotItem().getViewBox().sigXRangeChanged.connect(lambda *a: changes.append(a))
+    for k in range(1, 6):
+        s = np.arange(1200 + 40 * (k - 1), 1200 + 40 * k)
+        seq = s + (100 if k >= 3 else 0)                     # 100 frames lost: a gap
+        feed(seq, error_angle=np.zeros(40), encoder_outer=np.zeros(40))
+        panel.refresh()
+    assert changes == []                                     # the view's x range never moved
+    newest = panel.store.ring("HIGH_RATE").newest_time()
+    for plot in panel.plots:
+        vb = plot.getPlotItem().getViewBox()
+        assert vb.viewRange()[0] == pytest.approx([-2.0, 0.0])
+        assert plot.x_range() == pytest.approx((newest - 2.0, newest))
+        assert plot.time_axis.relative
+    shown = [line for line in panel.plots[0].gap_lines if line.isVisible()]
+    assert len(shown) == 1 and shown[0].value() == pytest.approx((1280 + 100) / RATE)
+    # where the gap line is on screen: its absolute time minus the newest one
+    vb = panel.plots[0].getPlotItem().getViewBox()
+    vb.updateMatrix()                                        # as the next paint would
+    at = vb.mapSceneToView(shown[0].mapToScene(0.0, 0.0)).x()
+    assert at == pytest.approx(shown[0].value() - newest)
+    x, _ = panel.plots[0].curves["HIGH_RATE.error_angle"].getData()
+    assert x[-1] == pytest.approx(newest)                    # the curve's data: absolute
+    panel.set_cursor(newest - 0.5)
+    assert panel.plots[1].cursor.value() == pytest.approx(newest - 0.5)
+    assert "newest" in panel._newest_text()
+
+    panel.set_paused(True)
+    panel.refresh()
+    for plot in panel.plots:
+        assert not plot.time_axis.relative and plot.origin == 0.0
+        assert plot.getPlotItem().getViewBox().viewRange()[0] == pytest.approx(
+            [newest - 2.0, newest])
+        assert plot.x_range() == pytest.approx((newest - 2.0, newest))
+    panel.set_paused(False)
+    panel.refresh()
+    assert panel.plots[0].time_axis.relative
+    assert panel.plots[0].getPlotItem().getViewBox().viewRange()[0] == pytest.approx([-2.0, 0.0])
