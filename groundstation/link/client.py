@@ -14,9 +14,10 @@ import random
 import re
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass, field
 from datetime import datetime
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 from ..codec import DatagramDecoder, FrameCodec, StreamDeframer, TelemetryBlock
 from ..codec.frames import decode_items, encode_items
@@ -60,7 +61,8 @@ class _Pending:
         self.answered = threading.Event()   # ACCEPTED or REJECTED seen
         self.finished = threading.Event()   # COMPLETED, FAILED or REJECTED seen
         self.reply_bytes = b""
-        self.last_send = 0.0
+        self.last_send = 0.0               # host time of the last send (the link's clock)
+        self.sent_at = 0.0                 # monotonic time of the last send (its timeout)
         self.error: Exception | None = None
         self.on_stage: Callable[[StageRecord], None] | None = None
 
@@ -287,6 +289,49 @@ class DeviceClient:
         Arguments are checked against commands.toml before anything is sent.  An
         unanswered command is resent with the same sequence number (the device
         executes it at most once)."""
+        return self._await(self._send_new(name, on_stage, arguments))
+
+    def commands(self, calls: Iterable[tuple[str, dict[str, Any]]], *,
+                 window: int = 16) -> list[CommandResult]:
+        """Commands pipelined: up to `window` are sent before the oldest one's answer is
+        waited for, so a transfer of many blocks costs about one round trip per window
+        instead of one per block.  Each is then waited for, retried, checked and handed
+        to the command listeners in the order given, as command() does.  After a refusal,
+        failure or timeout nothing more is sent; the commands already sent are waited
+        for, then the first error is raised.  `calls`: (name, arguments) pairs.  The
+        window stays well inside the device's memory of answered commands (64, SPEC
+        §6.4), so a retry is always recognised as one."""
+        window = max(1, min(int(window), 32))
+        sent: deque[tuple] = deque()
+        results: list[CommandResult] = []
+        error: BaseException | None = None
+        todo = iter(calls)
+        try:
+            while True:
+                while error is None and len(sent) < window:
+                    call = next(todo, None)
+                    if call is None:
+                        break
+                    try:
+                        sent.append(self._send_new(call[0], None, dict(call[1])))
+                    except GroundStationError as exc:
+                        error = exc
+                if not sent:
+                    break
+                try:
+                    results.append(self._await(sent.popleft()))
+                except GroundStationError as exc:
+                    error = error or exc
+        finally:
+            while sent:                  # interrupted: forget what will not be waited for
+                self._finished(sent.popleft()[1])
+        if error is not None:
+            raise error
+        return results
+
+    def _send_new(self, name: str, on_stage: Callable[[StageRecord], None] | None,
+                  arguments: dict[str, Any]) -> tuple:
+        """Check, encode and send a new command once; what _await() needs to follow it."""
         cmd = self.dictionary.command(name)
         if cmd.needs_session and self.session_token is None:
             raise NotConnectedError(f"{name}: no session - connect first")
@@ -311,38 +356,62 @@ class DeviceClient:
         p.on_stage = on_stage
         with self._lock:
             self._pending[seq] = p
+        try:
+            self._transmit(p, frame, "SENT")
+        except BaseException:
+            self._finished(p)
+            raise
+        return cmd, p, frame, token
+
+    def _transmit(self, p: _Pending, frame: bytes, stage_name: str) -> None:
+        p.last_send = time.time()
+        p.sent_at = time.monotonic()
+        stage = StageRecord(stage_name, "OK", p.last_send)
+        p.result.stages.append(stage)
+        self._notify(p.on_stage, stage)
+        with self._send_lock:
+            self.command_link.write(frame)
+
+    def _finished(self, p: _Pending) -> None:
+        """The command is no longer followed: forget it, tell the listeners."""
+        with self._lock:
+            self._pending.pop(p.result.sequence, None)
+        for cb in list(self._command_listeners):
+            try:
+                cb(p.result)
+            except Exception:
+                log.exception("command listener failed")
+
+    def _await(self, sent: tuple) -> CommandResult:
+        """Wait for a sent command's answer (resending it unanswered) and its end."""
+        cmd, p, frame, token = sent
+        result = p.result
+        name, seq, on_stage = result.name, result.sequence, p.on_stage
         defaults = self.dictionary.command_defaults
         accept_timeout = float(defaults["accept_timeout_s"])
         try:
-            for attempt in range(int(defaults["retries"]) + 1):
-                result.retries = attempt
-                p.last_send = time.time()
-                stage = StageRecord("SENT" if attempt == 0 else "RETRY", "OK", p.last_send)
-                result.stages.append(stage)
-                self._notify(on_stage, stage)
-                with self._send_lock:
-                    self.command_link.write(frame)
-                if p.answered.wait(accept_timeout):
-                    break
-            else:
-                result.stages.append(StageRecord("TIMEOUT", "NO_ANSWER", time.time()))
-                self._notify(on_stage, result.stages[-1])
-                versions = [e for e in self.stats.recent_errors()
-                            if isinstance(e, ProtocolVersionError)]
-                if versions:       # the device answers, but in another protocol version
-                    theirs = getattr(versions[-1], "version", "?")
-                    ours = self.dictionary.version_major
-                    advice = ("update the ground station" if isinstance(theirs, int) and theirs > ours
-                              else "update the firmware, or use the protocol/*.toml it was "
-                                   "built with (--protocol-dir)")
-                    raise DictionaryMismatchError(
-                        f"{name}: protocol version mismatch - the device answers in protocol "
-                        f"version {theirs}, this ground station speaks version {self.dictionary.version} "
-                        f"(dictionary hash {self.dictionary.hash:08x}); frames of the other "
-                        f"version cannot be read - {advice}", "DICTIONARY_MISMATCH")
-                raise CommandTimeout(
-                    f"{name} (seq {seq}): no answer from the device after {result.retries} "
-                    f"retries of {accept_timeout} s - is the link up?")
+            while not p.answered.wait(max(0.0, p.sent_at + accept_timeout - time.monotonic())):
+                if result.retries >= int(defaults["retries"]):
+                    result.stages.append(StageRecord("TIMEOUT", "NO_ANSWER", time.time()))
+                    self._notify(on_stage, result.stages[-1])
+                    versions = [e for e in self.stats.recent_errors()
+                                if isinstance(e, ProtocolVersionError)]
+                    if versions:       # the device answers, but in another protocol version
+                        theirs = getattr(versions[-1], "version", "?")
+                        ours = self.dictionary.version_major
+                        advice = ("update the ground station" if isinstance(theirs, int) and theirs > ours
+                                  else "update the firmware, or use the protocol/*.toml it was "
+                                       "built with (--protocol-dir)")
+                        raise DictionaryMismatchError(
+                            f"{name}: protocol version mismatch - the device answers in protocol "
+                            f"version {theirs}, this ground station speaks version {self.dictionary.version} "
+                            f"(dictionary hash {self.dictionary.hash:08x}); frames of the other "
+                            f"version cannot be read - {advice}", "DICTIONARY_MISMATCH")
+                    raise CommandTimeout(
+                        f"{name} (seq {seq}): no answer from the device after {result.retries} "
+                        f"retries of {accept_timeout} s - is the link up?")
+                result.retries += 1
+                self._transmit(p, frame, "RETRY")
             if not p.finished.wait(cmd.timeout_s):
                 result.stages.append(StageRecord("TIMEOUT", "NOT_COMPLETED", time.time()))
                 self._notify(on_stage, result.stages[-1])
@@ -363,13 +432,7 @@ class DeviceClient:
                 result.reply = decode_items(cmd.reply, p.reply_bytes, f"{name} reply")
             return result
         finally:
-            with self._lock:
-                self._pending.pop(seq, None)
-            for cb in list(self._command_listeners):
-                try:
-                    cb(result)
-                except Exception:
-                    log.exception("command listener failed")
+            self._finished(p)
 
     def _session_taken(self, name: str, data: bytes) -> SessionEndedError:
         """Our token stopped working: another host took the session over (SPEC §7).  The
