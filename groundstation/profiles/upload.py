@@ -42,6 +42,8 @@ log = logging.getLogger(__name__)
 HOUSEKEEPING_WAIT_S = 3.0
 #: how long HIGH_RATE may take to show the armed state (the held reference)
 TELEMETRY_WAIT_S = 3.0
+#: PROFILE_WRITE blocks sent ahead of their answers (DeviceClient.commands)
+WRITE_WINDOW = 16
 #: largest jump from the held position to an absolute REFERENCE profile's first sample
 MAX_START_JUMP_RAD = 1e-5
 
@@ -232,8 +234,12 @@ def _explained(client, error: type[ProfileError], name: str, args: dict[str, Any
     try:
         return client.command(name, **args)
     except (CommandRejected, CommandFailed) as exc:
-        advice = _REASON_ADVICE.get(getattr(exc, "reason", ""), "")
-        raise error(f"{exc}" + (f": {advice}" if advice else "")) from exc
+        raise _with_advice(error, exc) from exc
+
+
+def _with_advice(error: type[ProfileError], exc: CommandRejected | CommandFailed) -> ProfileError:
+    advice = _REASON_ADVICE.get(getattr(exc, "reason", ""), "")
+    return error(f"{exc}" + (f": {advice}" if advice else ""))
 
 
 class ProfileLoader:
@@ -274,10 +280,24 @@ class ProfileLoader:
         t0 = time.monotonic()
         self._command("PROFILE_BEGIN", profile_id=pid, target=target_code, sample_count=count)
         step = self.block_samples
-        for first in range(0, count, step):
-            self._command("PROFILE_WRITE", offset=first, samples=data[4 * first:4 * (first + step)])
+        blocks = [("PROFILE_WRITE", {"offset": first, "samples": data[4 * first:4 * (first + step)]})
+                  for first in range(0, count, step)]
+        # PROFILE_WRITE needs no device time and blocks commute (each names its offset),
+        # so they go pipelined, a window ahead of their answers: a 60 s profile is 285
+        # blocks, and one round trip each was most of an upload's time.  Only a client
+        # that pipelines by itself is asked to: a wrapper that forwards other attributes
+        # to a client gets every block through its own command().
+        pipelined = getattr(type(self.client), "commands", None) is not None
+        per_call = WRITE_WINDOW * 4 if pipelined else 1
+        for i in range(0, len(blocks), per_call):
+            group = blocks[i:i + per_call]
+            if pipelined:
+                self._commands(group)
+            else:
+                name, args = group[0]
+                self._command(name, **args)
             if progress:
-                progress("upload", min(1.0, (first + step) / count))
+                progress("upload", min(1.0, (i + len(group)) * step / count))
         result = self._command("PROFILE_COMMIT", profile_crc=crc)
         committed = next((s.device_tick for s in result.stages if s.stage == "COMPLETED"), None) or 0
         if verify_housekeeping:
@@ -304,6 +324,12 @@ class ProfileLoader:
 
     def _command(self, name: str, **args: Any):
         return _explained(self.client, ProfileUploadError, name, args)
+
+    def _commands(self, calls: list[tuple[str, dict[str, Any]]]):
+        try:
+            return self.client.commands(calls, window=WRITE_WINDOW)
+        except (CommandRejected, CommandFailed) as exc:
+            raise _with_advice(ProfileUploadError, exc) from exc
 
 
 class ProfilePlayer:
