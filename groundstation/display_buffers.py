@@ -11,7 +11,10 @@ extended with only the samples that arrived since the last look.  `PacketRing.en
 answers "min and max per bin of `per` samples over this window" from it, exactly, in a
 time that depends on the number of bins, not on the number of samples in the window.
 Bins are aligned to the sample count since the ring was cleared (bin k holds samples
-k*per .. k*per+per-1), so a scrolling chart's bins do not shift under the data.
+k*per .. k*per+per-1), so a scrolling chart's bins do not shift under the data.  A
+complete bin never changes (its samples are written once), so the ring also remembers
+the complete bins it answered last per channel (`_BinCache`): a scrolling chart's next
+frame reduces only the bins completed since, and the two bins cut by the window's edges.
 
 No Qt here: the GUI and tests use the same store.
 """
@@ -62,6 +65,7 @@ class PacketRing:
         self._count = 0                # valid samples (<= capacity)
         self._written = 0              # samples written since clear: the next sample's index
         self._pyramids: dict[str, MinMaxPyramid] = {}   # channels a chart looked at
+        self._bin_cache: dict[str, _BinCache] = {}      # their last complete bins
         #: counts appends and clears: a chart with nothing new to show need not redraw
         self.changes = 0
         self.total_frames = 0
@@ -206,6 +210,7 @@ class PacketRing:
             self._head = self._count = self._written = 0
             self.changes += 1
             self._pyramids.clear()
+            self._bin_cache.clear()
             self.total_frames = 0
             self._sequence = SequenceTracker()
             self._unwrap = TickUnwrapper()
@@ -287,15 +292,11 @@ class PacketRing:
         out = np.empty(2 * (kb - ka + 1))
         mn, mx = out[0::2], out[1::2]
         if fb > fa:
-            lo, hi = fa - ka, fb - ka
-            block = max((b for b in PYRAMID_BLOCKS if b <= per), default=0)
-            if block:
-                pyr = self._pyramid(channel)
-                mn[lo:hi], mx[lo:hi] = pyr.bins(PYRAMID_BLOCKS.index(block), fa * per, fb * per, per)
-            else:
-                whole = self._take(data, fa * per, fb * per).reshape(-1, per)
-                np.min(whole, axis=1, out=mn[lo:hi])
-                np.max(whole, axis=1, out=mx[lo:hi])
+            cache = self._bin_cache.get(channel)
+            if cache is None or cache.per != per:
+                cache = self._bin_cache[channel] = _BinCache(per)
+            mn[fa - ka:fb - ka], mx[fa - ka:fb - ka] = cache.bins(
+                fa, fb, lambda k0, k1: self._whole_bins(channel, k0, k1, per))
         if fa > ka:                                         # the first bin, cut by ga
             part = self._take(data, ga, min(gb, (ka + 1) * per))
             mn[0], mx[0] = part.min(), part.max()
@@ -303,6 +304,14 @@ class PacketRing:
             part = self._take(data, kb * per, gb)
             mn[-1], mx[-1] = part.min(), part.max()
         return out
+
+    def _whole_bins(self, channel: str, k0: int, k1: int, per: int) -> tuple[np.ndarray, np.ndarray]:
+        """Min and max of complete bins k0 .. k1-1 of `per` samples (lock held)."""
+        block = max((b for b in PYRAMID_BLOCKS if b <= per), default=0)
+        if block:
+            return self._pyramid(channel).bins(PYRAMID_BLOCKS.index(block), k0 * per, k1 * per, per)
+        whole = self._take(self._data[channel], k0 * per, k1 * per).reshape(-1, per)
+        return whole.min(axis=1), whole.max(axis=1)
 
     def _pyramid(self, channel: str) -> "MinMaxPyramid":
         """The channel's pyramid, extended with the samples since the last look (lock held)."""
@@ -343,6 +352,37 @@ class Envelope:
     breaks: np.ndarray             # point indices before which a gap breaks the line
     first_index: int               # number (since clear) of the span's first sample
     samples: int                   # samples in the span
+
+
+class _BinCache:
+    """The min and max of complete bins ka .. ka+len-1 of `per` samples of one channel,
+    as last answered: complete bins never change, so only the others are reduced again."""
+
+    def __init__(self, per: int):
+        self.per = per
+        self.ka = 0
+        self.mn = self.mx = np.empty(0)
+
+    def bins(self, fa: int, fb: int, reduce) -> tuple[np.ndarray, np.ndarray]:
+        """Bins fa .. fb-1; `reduce(k0, k1)` gives (min, max) of bins k0 .. k1-1."""
+        a, b = max(fa, self.ka), min(fb, self.ka + len(self.mn))
+        if a >= b:                                   # nothing to reuse
+            mn, mx = reduce(fa, fb)
+        else:
+            parts_mn, parts_mx = [], []
+            if fa < a:
+                lo = reduce(fa, a)
+                parts_mn.append(lo[0])
+                parts_mx.append(lo[1])
+            parts_mn.append(self.mn[a - self.ka:b - self.ka])
+            parts_mx.append(self.mx[a - self.ka:b - self.ka])
+            if b < fb:
+                hi = reduce(b, fb)
+                parts_mn.append(hi[0])
+                parts_mx.append(hi[1])
+            mn, mx = np.concatenate(parts_mn), np.concatenate(parts_mx)
+        self.ka, self.mn, self.mx = fa, mn, mx
+        return mn, mx
 
 
 #: block sizes (samples) of a pyramid's levels; each block is 16 blocks of the level below
