@@ -17,7 +17,7 @@ import math
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt, Signal
+from PySide6.QtCore import QRectF, Qt, Signal
 from PySide6.QtWidgets import QGraphicsItem, QMenu, QWidget
 
 from .channel_tree import DisplayUnit, channel_ids_from_text
@@ -139,24 +139,47 @@ class ChartCurve(pg.PlotCurveItem):
         super().__init__(pen=pen)
         self._bounds: tuple | None = None
         self._ybounds: tuple[float, float] | None = None
+        self._extent: tuple[float, float, float, float] | None = None   # all points
 
     def set_points(self, x: np.ndarray, y: np.ndarray, lo: float, hi: float) -> None:
         """Draw (x, y); NaN in y breaks the line.  lo, hi: the time window shown."""
+        # the old extent stays until setData has marked the old picture's area for repaint
         self._bounds = self._ybounds = None
         if not len(x):
             self.setData(x, y)
+            self._extent = self._boundingRect = None
             return
         a, b = int(np.searchsorted(x, lo, side="left")), int(np.searchsorted(x, hi, side="right"))
         inside = y[a:b]
-        if len(inside) and not np.isnan(inside).all():
-            ybounds = (float(np.nanmin(inside)), float(np.nanmax(inside)))
-        else:
-            ybounds = (None, None)
         finite = not np.isnan(y).any()
+        if finite:
+            ybounds = (float(inside.min()), float(inside.max())) if len(inside) else (None, None)
+            ya, yb = float(y.min()), float(y.max())
+        else:
+            ybounds = ((float(np.nanmin(inside)), float(np.nanmax(inside)))
+                       if len(inside) and not np.isnan(inside).all() else (None, None))
+            ya, yb = ((float(np.nanmin(y)), float(np.nanmax(y)))
+                      if not np.isnan(y).all() else (math.nan, math.nan))
         self._ybounds = ybounds if ybounds[0] is not None else None
         # Known finite: pyqtgraph skips its own finite check and builds the path in one go.
         self.setData(x, y, connect="all" if finite else "finite", skipFiniteCheck=finite)
         self._bounds = ((float(x[0]), float(x[-1])), ybounds)
+        self._extent = (float(x[0]), float(x[-1]), ya, yb) if math.isfinite(ya) else None
+        self._boundingRect = None
+
+    def boundingRect(self):
+        """All points, with a margin of 1 % of the view's range for the pen: pyqtgraph
+        works out its margin in pixels from the device transform on every new set of
+        points, which cost more than building the curve's path."""
+        if self._boundingRect is None:
+            vb = self.getViewBox()
+            if self._extent is None or vb is None:
+                return QRectF()
+            x0, x1, y0, y1 = self._extent
+            (va, vb_), (wa, wb) = vb.state["viewRange"]
+            px, py = 0.01 * (vb_ - va), 0.01 * (wb - wa)
+            self._boundingRect = QRectF(x0 - px, y0 - py, x1 - x0 + 2 * px, y1 - y0 + 2 * py)
+        return self._boundingRect
 
     def window_y_bounds(self) -> tuple[float, float] | None:
         """Lowest and highest y inside the time window (None: no finite points there)."""
