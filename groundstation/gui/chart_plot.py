@@ -3,9 +3,9 @@ the time axis that switches between device seconds, wall-clock labels and (live)
 before the newest sample.
 
 Live, the view's x range stays put at -window..0 and the plot's contents move instead:
-every item that sits at a time is placed at its time minus the plot's `origin` (the
-newest sample's time): the curves each, the gap markers and the cursor together in one
-translated layer (so their `value()` stays an absolute time).  A scrolling view range made
+every item that sits at a time (curves, gap markers, the cursor) lives in one layer that
+is moved to minus the plot's `origin` (the newest sample's time), so their own
+coordinates (`getData()`, `value()`) stay absolute times.  A scrolling view range made
 pyqtgraph redo its range bookkeeping for every linked plot and regenerate the time axis's
 ticks and labels on every frame; a fixed one does neither.  Paused, the origin is 0 and
 the axis shows absolute time.  Times in and out of this class (`x_range`, `set_cursor`,
@@ -237,10 +237,11 @@ class ChartPlot(pg.PlotWidget):
         self._info_html: str | None = None
         self.cursor = pg.InfiniteLine(angle=90, movable=False,
                                       pen=pg.mkPen((255, 255, 255, 150), style=Qt.PenStyle.DotLine))
-        # the markers' layer, moved as a whole by set_origin; not counted by autoscale
-        self._markers = pg.ItemGroup()
-        vb.addItem(self._markers, ignoreBounds=True)
-        self.cursor.setParentItem(self._markers)
+        # the layer of everything placed in time, moved as a whole by set_origin; the
+        # curves stay among the view box's items (autoscale, "View All") as they join it
+        self._layer = pg.ItemGroup()
+        vb.addItem(self._layer, ignoreBounds=True)
+        self.cursor.setParentItem(self._layer)
         self.cursor.hide()
         self._gap_pen = pg.mkPen((255, 50, 50, 200), width=1, style=Qt.PenStyle.DashLine)
         self.gap_lines: list[pg.InfiniteLine] = []
@@ -261,7 +262,7 @@ class ChartPlot(pg.PlotWidget):
         self.units[cid] = unit
         self._names[cid] = name
         self.getPlotItem().addItem(curve)
-        curve.setPos(-self.origin, 0.0)
+        curve.setParentItem(self._layer)
         self._relabel()
         return curve
 
@@ -300,9 +301,7 @@ class ChartPlot(pg.PlotWidget):
         if origin == self.origin:
             return
         self.origin = origin
-        for curve in self.curves.values():
-            curve.setPos(-origin, 0.0)
-        self._markers.setPos(-origin, 0.0)
+        self._layer.setPos(-origin, 0.0)
 
     def set_x_view(self, lo: float, hi: float) -> None:
         """Show view x lo..hi (in view coordinates: absolute time − origin); nothing
@@ -347,7 +346,7 @@ class ChartPlot(pg.PlotWidget):
         shown = gap_x[-self.MAX_GAP_MARKERS:]
         while len(self.gap_lines) < len(shown):
             line = pg.InfiniteLine(angle=90, movable=False, pen=self._gap_pen)
-            line.setParentItem(self._markers)
+            line.setParentItem(self._layer)
             self.gap_lines.append(line)
         for line, x in zip(self.gap_lines, shown.tolist()):
             if line.value() != x:
