@@ -142,7 +142,8 @@ class SteppedClock:
         self._lock = threading.Lock()          # one of idle / advance runs the device
         self._stop = threading.Event()
         self._fast = threading.Event()         # fast_forward(): the idle thread runs flat out
-        self._commanded = threading.Event()    # held: a command ran (a profile may have started)
+        # held: a command ran (a profile may have started), fast_forward() began or close()
+        self._commanded = threading.Event()
         self.error: BaseException | None = None
         #: wall seconds the clock spent waiting for credits (receiver, recorder): for the
         #: benchmark's profile
@@ -174,8 +175,12 @@ class SteppedClock:
                         continue
                 if ran is not None or not held:
                     continue
-            if held:              # nothing plays yet (or any more): until the next command
-                self._commanded.wait(period)
+            if held:
+                # nothing plays yet (or any more): sleep until a command, fast_forward() or
+                # close() says otherwise.  No polling: a thread that woke up every 10 ms
+                # took the interpreter from the one running the device a hundred times a
+                # wall second, each time a thread switch on a busy machine.
+                self._commanded.wait()
                 self._commanded.clear()
                 continue
             if self._stop.wait(period):
@@ -253,6 +258,7 @@ class SteppedClock:
         profile playing to its end; held between steps: only while a profile plays)."""
         self.error = None
         self._fast.set()
+        self._commanded.set()
         try:
             yield
         finally:
@@ -292,6 +298,7 @@ class SteppedClock:
     def close(self) -> None:
         self._stop.set()
         self._fast.clear()
+        self._commanded.set()
         self._idle.join(timeout=15)
         if getattr(self.device, "after_commands", None) == self._confirm:
             self.device.after_commands = None
