@@ -13,7 +13,7 @@ import logging
 import socket
 import threading
 import time
-from typing import Any, Callable
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
@@ -49,6 +49,21 @@ ANSWERED_IN_FULL = frozenset({"HEARTBEAT", "GET_INFO", "PARAM_BEGIN", "PARAM_WRI
 #: commands the device confirms in HOUSEKEEPING (the active table's CRC, the active
 #: profile): their confirmation needs the rest of the housekeeping period
 CONFIRMED_IN_HOUSEKEEPING = frozenset({"PARAM_COMMIT", "PROFILE_COMMIT"})
+
+
+def _packed(frames: list[bytes], datagram_bytes: int) -> list[bytes]:
+    """Whole frames (of any lengths, in order) joined into datagrams of at most
+    `datagram_bytes` (a longer frame alone in its own)."""
+    out: list[bytes] = []
+    start, size = 0, 0
+    for i, frame in enumerate(frames):
+        if size and size + len(frame) > datagram_bytes:
+            out.append(b"".join(frames[start:i]))
+            start, size = i, 0
+        size += len(frame)
+    if size:
+        out.append(b"".join(frames[start:]))
+    return out
 
 
 class _Connection:
@@ -296,14 +311,17 @@ class SimulatedDevice:
             target[1].send(b"".join(frames))
             return
         step = (group or self.frames_per_datagram) if frame_groups else 1
-        for i in range(0, len(frames), step):
-            datagram = b"".join(frames[i:i + step])
+        self._send_datagrams(target[1], (b"".join(frames[i:i + step])
+                                         for i in range(0, len(frames), step)))
+
+    def _send_datagrams(self, address: tuple, datagrams: Iterable[bytes]) -> None:
+        for datagram in datagrams:
             if self.datagram_filter is not None:
                 datagram = self.datagram_filter(datagram)
                 if datagram is None:
                     continue
             try:
-                self._udp.sendto(datagram, target[1])
+                self._udp.sendto(datagram, address)
                 self.datagrams_sent += 1
             except OSError as exc:       # host gone or buffer full: a real rig drops too
                 self.firmware.overruns += 1
@@ -343,14 +361,21 @@ class SimulatedDevice:
             if only_while_playing and not self.firmware.profile_active:
                 return None
             frames, hk_frames = self._simulate(n)
-            # HOUSEKEEPING and EVENTs first, HIGH_RATE last: the arrival of the last
+            # EVENTs and HOUSEKEEPING first, HIGH_RATE last: the arrival of the last
             # HIGH_RATE frame then tells the clock that all of it has arrived (one socket to
             # one socket keeps the datagrams' order)
-            self._flush_events()
-            if self._telemetry_target() is not None:
-                self._send_telemetry(hk_frames, frame_groups=False)
-                group = max(1, datagram_bytes // len(frames[0])) if datagram_bytes and frames else None
+            events = self._event_frames()
+            target = self._telemetry_target()
+            if target is not None and target[0] == "udp" and datagram_bytes:
+                # these packed too: every datagram is a send here and a receive in the
+                # host, and each of those lets another thread take the interpreter
+                self._send_datagrams(target[1], _packed(events + hk_frames, datagram_bytes))
+                group = max(1, datagram_bytes // len(frames[0])) if frames else 1
                 self._send_telemetry(frames, frame_groups=True, group=group)
+            elif target is not None:
+                self._send_telemetry(events, frame_groups=False)
+                self._send_telemetry(hk_frames, frame_groups=False)
+                self._send_telemetry(frames, frame_groups=True)
             self.host_heard()
             return self.firmware.tick & 0xFFFFFFFF
 
