@@ -82,3 +82,16 @@ def test_a_lost_command_in_flight_is_resent_and_executed_once(dictionary, device
         assert staged == b"".join(a["samples"] for _, a in calls)
     finally:
         client.close()
+
+
+def test_the_journal_record_of_a_command_is_asdict_of_it(client):
+    from dataclasses import asdict
+
+    from groundstation.logs.live import command_record
+    client.connect()
+    results = [client.command("GET_INFO")]
+    client.command("PROFILE_BEGIN", profile_id=7, target=2, sample_count=8)
+    results += client.commands(_blocks(2))
+    for result in results:
+        assert result.stages and command_record(result) == asdict(result)
+        assert list(command_record(result)) == list(asdict(result))

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict
 from typing import Callable
 
 from ..link.client import CommandResult, DeviceClient
@@ -10,6 +9,16 @@ from .recorder import Recorder
 
 #: commands too frequent and too dull for the journal (the link statistics cover them)
 UNJOURNALED = {"HEARTBEAT"}
+
+
+def command_record(result: CommandResult) -> dict:
+    """What asdict(result) gives, without its deep copies (the values are numbers, text
+    and bytes; the dicts and lists are new).  asdict took about 0.3 ms a command, the
+    largest part of a profile upload's host time (hundreds of PROFILE_WRITE blocks)."""
+    return {"name": result.name, "sequence": result.sequence,
+            "arguments": dict(result.arguments),
+            "stages": [dict(vars(stage)) for stage in result.stages],
+            "reply": dict(result.reply), "retries": result.retries}
 
 
 def attach_recorder(client: DeviceClient, recorder: Recorder) -> Callable[[], None]:
@@ -24,7 +33,7 @@ def attach_recorder(client: DeviceClient, recorder: Recorder) -> Callable[[], No
     def journal_command(result: CommandResult) -> None:
         if result.name in UNJOURNALED:
             return
-        record = asdict(result)
+        record = command_record(result)
         record["final_stage"] = result.final_stage
         t = result.stages[0].host_time if result.stages else None
         recorder.record("command", record, at=t)
