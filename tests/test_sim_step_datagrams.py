@@ -61,3 +61,18 @@ def test_a_chunk_is_a_few_datagrams_and_the_same_frames(client, device):
     for got, ticks in ((one, range(tick0 + 1, tick0 + 901)), (packed, range(tick0 + 901, tick0 + 1801))):
         assert list(got["HOUSEKEEPING"]) == [t for t in ticks if t % every == 0]
     assert len(packed["EVENT"]) == len(one["EVENT"]) == 1
+
+
+def test_response_frames_are_what_the_general_encoder_makes(device, dictionary):
+    """The device packs RESPONSE frames with a struct built from the dictionary; the
+    bytes are those of the encoder every other frame uses."""
+    from groundstation.sim.firmware import Stage
+    assert device._response_layout is not None          # the shipped dictionary's layout
+    for stage in (Stage(1), Stage(3, 0, b"\x01\x02reply"), Stage(2, 7), Stage(4, 13, b"")):
+        seq = device._seq["RESPONSE"]
+        fast = device._response(0xDEADBEEF, 0x0031, stage)
+        general = device.codec.encode_variable("RESPONSE", {
+            "command_sequence": 0xDEADBEEF, "opcode": 0x0031, "stage": stage.stage,
+            "reason": stage.reason, "data": stage.data}, seq, device.firmware.tick)
+        assert fast == general
+        assert device._seq["RESPONSE"] == seq + 1

@@ -11,6 +11,7 @@ from __future__ import annotations
 import itertools
 import logging
 import socket
+import struct
 import threading
 import time
 from typing import Any, Callable, Iterable
@@ -49,6 +50,28 @@ ANSWERED_IN_FULL = frozenset({"HEARTBEAT", "GET_INFO", "PARAM_BEGIN", "PARAM_WRI
 #: commands the device confirms in HOUSEKEEPING (the active table's CRC, the active
 #: profile): their confirmation needs the rest of the housekeeping period
 CONFIRMED_IN_HOUSEKEEPING = frozenset({"PARAM_COMMIT", "PROFILE_COMMIT"})
+
+
+def _response_struct(dictionary: Dictionary) -> tuple[int, struct.Struct] | None:
+    """(packet id, struct of the fixed items) of RESPONSE when its items are the ones the
+    device fills in - command_sequence, opcode, stage, reason as plain integers, then the
+    variable data - so a frame can be packed without the general encoder; None (use the
+    encoder) for any other layout a dictionary may give it."""
+    pkt = dictionary.packet("RESPONSE")
+    items = pkt.items
+    names = [item.name for item in items]
+    if names != ["command_sequence", "opcode", "stage", "reason", "data"] or not items[-1].is_variable:
+        return None
+    codes = []
+    for item in items[:-1]:
+        dt = item.wire_dtype
+        if item.has_conversion or dt.kind not in "iu":
+            return None
+        codes.append(dt.newbyteorder(">").char)
+    fixed = struct.Struct(">" + "".join(codes))
+    if fixed.size != pkt.fixed_payload_size:
+        return None
+    return pkt.id, fixed
 
 
 def _packed(frames: list[bytes], datagram_bytes: int) -> list[bytes]:
@@ -131,6 +154,7 @@ class SimulatedDevice:
                                            for name in ANSWERED_IN_FULL)
         self._confirmed_in_hk = frozenset(self.dictionary.command(name).opcode
                                           for name in CONFIRMED_IN_HOUSEKEEPING)
+        self._response_layout = _response_struct(self.dictionary)
         self.tcp_port: int | None = None
         self._t0: float | None = None
         self._ticks_done = 0
@@ -251,9 +275,7 @@ class SimulatedDevice:
                 confirm = confirm or opcode not in self._answered_in_full
                 housekeeping = housekeeping or opcode in self._confirmed_in_hk
                 for st in stages:
-                    out.append(self._frame("RESPONSE", {
-                        "command_sequence": seq, "opcode": opcode, "stage": st.stage,
-                        "reason": st.reason, "data": st.data}))
+                    out.append(self._response(seq, opcode, st))
             self._flush_events()
             if confirm and self.pacing == "manual" and self.after_commands is not None:
                 self.after_commands(housekeeping)
@@ -282,6 +304,19 @@ class SimulatedDevice:
             at = data.find(b"\xEB\x90", at + 2)
         if out:
             conn.send(b"".join(out))
+
+    def _response(self, seq: int, opcode: int, st) -> bytes:
+        """One RESPONSE frame.  Its fixed items are packed with a struct made from the
+        dictionary once (see _response_struct): the general encoder checks every item
+        of every frame, and a profile upload answers hundreds of blocks twice each."""
+        if self._response_layout is None:
+            return self._frame("RESPONSE", {"command_sequence": seq, "opcode": opcode,
+                                            "stage": st.stage, "reason": st.reason,
+                                            "data": st.data})
+        packet_id, fixed = self._response_layout
+        frame_seq = self._next_seq("RESPONSE")
+        return self.codec.frame(packet_id, fixed.pack(seq, opcode, st.stage, st.reason)
+                                + bytes(st.data), frame_seq, self.firmware.tick)
 
     def _frame(self, packet: str, values: dict[str, Any], tick: int | None = None) -> bytes:
         seq = self._seq[packet]
