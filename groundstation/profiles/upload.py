@@ -146,6 +146,8 @@ class _Monitor:
         self.events: list[tuple[int, str]] = []
         #: the last HIGH_RATE blocks as (ticks, profile_index), for follow()
         self.recent: deque[tuple[np.ndarray, np.ndarray]] = deque(maxlen=64)
+        #: the predicates wait() is waiting on: a block wakes the waiter only when one holds
+        self._waiting: list[Callable[[], bool]] = []
         client.subscribe(self)
 
     def __call__(self, block) -> None:
@@ -171,7 +173,10 @@ class _Monitor:
                 del self.events[:-256]
             else:
                 return
-            self.cond.notify_all()
+            # not on every block: a waiter that wakes for nothing takes the interpreter
+            # from the thread running the device (fast simulator, same process) every time
+            if any(predicate() for predicate in self._waiting):
+                self.cond.notify_all()
 
     def _scan(self, ticks: np.ndarray, idx: np.ndarray) -> None:
         if self.since is None:
@@ -215,12 +220,16 @@ class _Monitor:
     def wait(self, predicate: Callable[[], bool], timeout: float) -> bool:
         deadline = time.monotonic() + timeout
         with self.cond:
-            while not predicate():
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self.cond.wait(min(left, 0.1))
-            return True
+            self._waiting.append(predicate)
+            try:
+                while not predicate():
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        return False
+                    self.cond.wait(min(left, 0.1))
+                return True
+            finally:
+                self._waiting.remove(predicate)
 
     def close(self) -> None:
         unsubscribe = getattr(self.client, "unsubscribe", None)
