@@ -241,6 +241,9 @@ class ChartPlot(pg.PlotWidget):
         # curves stay among the view box's items (autoscale, "View All") as they join it
         self._layer = pg.ItemGroup()
         vb.addItem(self._layer, ignoreBounds=True)
+        # Moving it tells nobody: the y autoscale reads the curves' own bounds, and each
+        # move had pyqtgraph's itemChange (Python) ask the view box to recompute them.
+        self._layer.setFlag(self._layer.GraphicsItemFlag.ItemSendsGeometryChanges, False)
         self.cursor.setParentItem(self._layer)
         self.cursor.hide()
         self._gap_pen = pg.mkPen((255, 50, 50, 200), width=1, style=Qt.PenStyle.DashLine)
