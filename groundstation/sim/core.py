@@ -90,10 +90,7 @@ def _safe_state(fw):
     fw[FW_MODE] = MODE_IDLE
 
 
-# nogil: the loop touches only the arrays passed in, which the engine's owner uses under
-# the device's lock; meanwhile the host's receiver (the same process on a fast campaign)
-# can decode the previous chunk on the other core instead of waiting for the interpreter
-@njit(cache=True, nogil=True)
+@njit(cache=True)
 def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
               cstate, cstack, clut_x, clut_y, cparams, sos, zs, zs_new,
               gbuf, gpos, profile, noise, v_fg, out, truth, events):
