@@ -17,7 +17,9 @@ import math
 
 import numpy as np
 import pyqtgraph as pg
+from pyqtgraph import functions as fn
 from PySide6.QtCore import QRectF, Qt, Signal
+from PySide6.QtGui import QPainter
 from PySide6.QtWidgets import QGraphicsItem, QMenu, QWidget
 
 from .channel_tree import DisplayUnit, channel_ids_from_text
@@ -140,6 +142,10 @@ class ChartCurve(pg.PlotCurveItem):
         self._bounds: tuple | None = None
         self._ybounds: tuple[float, float] | None = None
         self._extent: tuple[float, float, float, float] | None = None   # all points
+        self._finite = False
+        self._poly = None                  # the points as a QPolygonF, reused frame to frame
+        self._poly_xy = np.empty((0, 2))   # its memory, as numpy sees it
+        self._poly_stale = True
 
     def set_points(self, x: np.ndarray, y: np.ndarray, lo: float, hi: float) -> None:
         """Draw (x, y); NaN in y breaks the line.  lo, hi: the time window shown."""
@@ -161,11 +167,30 @@ class ChartCurve(pg.PlotCurveItem):
             ya, yb = ((float(np.nanmin(y)), float(np.nanmax(y)))
                       if not np.isnan(y).all() else (math.nan, math.nan))
         self._ybounds = ybounds if ybounds[0] is not None else None
+        self._finite, self._poly_stale = finite, True
         # Known finite: pyqtgraph skips its own finite check and builds the path in one go.
         self.setData(x, y, connect="all" if finite else "finite", skipFiniteCheck=finite)
         self._bounds = ((float(x[0]), float(x[-1])), ybounds)
         self._extent = (float(x[0]), float(x[-1]), ya, yb) if math.isfinite(ya) else None
         self._boundingRect = None
+
+    def paint(self, p, opt, widget):
+        """Finite points as one polyline from a reused QPolygonF: the same strokes as
+        pyqtgraph's path, without building a QPainterPath every frame.  Anything else
+        (NaN breaks) as pyqtgraph draws it."""
+        x = self.xData
+        if not self._finite or x is None or len(x) < 2:
+            return super().paint(p, opt, widget)
+        if self._poly_stale:
+            if len(self._poly_xy) != len(x):
+                self._poly = fn.create_qpolygonf(len(x))
+                self._poly_xy = fn.ndarray_from_qpolygonf(self._poly)
+            self._poly_xy[:, 0] = x
+            self._poly_xy[:, 1] = self.yData
+            self._poly_stale = False
+        p.setRenderHint(QPainter.RenderHint.Antialiasing, bool(self.opts["antialias"]))
+        p.setPen(self.opts["pen"])
+        p.drawPolyline(self._poly)
 
     def boundingRect(self):
         """All points, with a margin of 1 % of the view's range for the pen: pyqtgraph
