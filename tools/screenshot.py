@@ -17,7 +17,7 @@ from pathlib import Path
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
-from PySide6.QtCore import QSettings, QTimer  # noqa: E402
+from PySide6.QtCore import QSettings, Qt, QTimer  # noqa: E402
 from PySide6.QtWidgets import QApplication  # noqa: E402
 
 from groundstation.dictionary import load_dictionary  # noqa: E402
@@ -35,7 +35,7 @@ def main() -> int:
     settings = QSettings(str(ROOT / "build" / "screenshot-settings.ini"), QSettings.Format.IniFormat)
     settings.clear()
     win = MainWindow(session, settings)
-    win.resize(1680, 1000)
+    win.resize(1680, 1150)
     win.show()
     win.commands.confirm_override = True
     win.parameters.confirm_override = True
@@ -48,6 +48,8 @@ def main() -> int:
 
     def upload():
         win.docks["Parameters"].raise_()
+        # room for the dock's Bode plot under its design summary (once the layout is settled)
+        win.resizeDocks([win.docks["Parameters"]], [340], Qt.Orientation.Vertical)
         if win.parameters.load_design(design):
             win.parameters.upload()
 
@@ -80,7 +82,10 @@ def main() -> int:
             out = ROOT / "docs" / "screenshot.png"
             win.grab().save(str(out))
             print(f"wrote {out}")
+            # once: a tick after close() would grab the closed window (charts hidden, no fps)
+            timer.stop()
             win.close()
+            app.quit()
     timer = QTimer()
     timer.timeout.connect(tick)
     timer.start(100)

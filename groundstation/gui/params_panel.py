@@ -89,13 +89,12 @@ class ParameterPanel(QWidget):
         self.progress = QProgressBar()
         self.progress.setRange(0, 100)
         self.progress.setVisible(False)
-        # the full validation report: scrollable, so a low dock still shows the table
+        # the full validation report: scrollable, above the table and Bode plot in a
+        # splitter that gives it little room at first, so a low dock still shows the plot
         self.report_view = QTextBrowser()
-        self.report_view.setMaximumHeight(120)
         self.report_view.setVisible(False)
         lay.addWidget(self.design_label)
         lay.addWidget(self.result)
-        lay.addWidget(self.report_view)
         lay.addWidget(self.progress)
         # side by side: the panel usually lives in a wide, low bottom dock
         split = QSplitter(Qt.Orientation.Horizontal)
@@ -116,7 +115,13 @@ class ParameterPanel(QWidget):
         self.phase_plot.setXLink(self.mag_plot)
         split.addWidget(self.bode_view)
         split.setSizes([600, 500])
-        lay.addWidget(split, 1)
+        rows = QSplitter(Qt.Orientation.Vertical)
+        rows.addWidget(self.report_view)
+        rows.addWidget(split)
+        rows.setStretchFactor(0, 0)
+        rows.setStretchFactor(1, 1)
+        rows.setSizes([60, 400])
+        lay.addWidget(rows, 1)
         self.load_button.clicked.connect(self.load_design_dialog)
         self.validate_button.clicked.connect(self.run_validation)
         self.upload_button.clicked.connect(self.upload)
