@@ -11,7 +11,7 @@ import pytest
 
 from groundstation.codec import FrameCodec, StreamDeframer
 from groundstation.display_buffers import TelemetryStore
-from groundstation.gui.chart_autoscale import nice_range, nice_step, sticky_range
+from groundstation.gui.chart_autoscale import EDGE, nice_range, nice_step, sticky_range
 from groundstation.gui.charts import StripChartPanel
 
 RATE = 1200.0
@@ -78,6 +78,13 @@ def test_autoscaled_y_range_holds_while_the_data_stay_inside(panel, dictionary):
     assert len(set(ranges)) == 1
     lo, hi = ranges[0]
     assert lo < -1e-4 and hi > 1e-4 and hi - lo < 4e-4
+    # the round range's ends (where ticks and their labels go) sit inside the view, by
+    # EDGE of the range, so a label at an end is not drawn over the neighbouring plot
+    a, b = panel.plots[0].getPlotItem().getViewBox()._round_range
+    assert lo < a < b < hi
+    assert a - lo == pytest.approx(EDGE * (b - a)) and hi - b == pytest.approx(EDGE * (b - a))
+    fine = 10.0 ** (math.floor(math.log10(b - a)) - 1)      # the ends are round numbers
+    assert a / fine == pytest.approx(round(a / fine)) and b / fine == pytest.approx(round(b / fine))
     feed(np.arange(total, total + 40), error_angle=np.full(40, 5e-4))  # out of the range
     panel.refresh()
     assert panel.plots[0].y_range()[1] >= 5e-4

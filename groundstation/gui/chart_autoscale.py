@@ -19,6 +19,9 @@ MARGIN = 0.1
 SHRINK_BELOW = 0.4
 #: about this many steps of a round size in a chosen range
 STEPS = 8
+#: the view shows this fraction of the round range beyond each end, so the labels of the
+#: ticks on the round ends are drawn inside their plot, not over the neighbouring plot's
+EDGE = 0.05
 
 
 def nice_step(size: float) -> float:
@@ -69,9 +72,16 @@ class ChartViewBox(pg.ViewBox):
         try:
             bounds = self._y_bounds()
             if bounds is not None:
-                new = sticky_range(bounds[0], bounds[1], tuple(self.state["viewRange"][1]))
+                chosen = getattr(self, "_round_range", None)
+                view = self.state["viewRange"][1]
+                if chosen is not None and not all(
+                        math.isclose(x, v, rel_tol=1e-9, abs_tol=1e-12 * abs(chosen[1] - chosen[0]))
+                        for x, v in zip(_shown(chosen), view)):
+                    chosen = None          # the range was set by other means since
+                new = sticky_range(bounds[0], bounds[1], chosen)
                 if new is not None:
-                    self.setRange(yRange=new, padding=0.0, disableAutoRange=False)
+                    self._round_range = new
+                    self.setRange(yRange=_shown(new), padding=0.0, disableAutoRange=False)
         finally:
             self._autoRangeNeedsUpdate = False
             self._updatingRange = False
@@ -92,3 +102,10 @@ class ChartViewBox(pg.ViewBox):
             if b is not None:
                 lo, hi = min(lo, b[0]), max(hi, b[1])
         return (lo, hi) if lo <= hi else None
+
+
+def _shown(round_range: tuple[float, float]) -> tuple[float, float]:
+    """What the view shows for a round range: EDGE of it more at either end."""
+    a, b = round_range
+    e = EDGE * (b - a)
+    return a - e, b + e
