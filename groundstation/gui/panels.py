@@ -154,6 +154,7 @@ class StatusPanel(QWidget):
         lay = QVBoxLayout(self)
         grid = QGridLayout()
         self.fields: dict[str, QLabel] = {}
+        self._shown: dict[str, tuple[str, str]] = {}     # what each label shows: (text, colour)
         names = ["mode", "armed", "coarse_saturated", "fine_saturated", "fault", "fault_code",
                  "watchdog", "temp_motor_coarse", "temp_flexure", "param_table_crc"]
         for i, name in enumerate(names):
@@ -213,13 +214,9 @@ class StatusPanel(QWidget):
             crc = int(hk.latest("param_table_crc"))
             self._set("param_table_crc", f"{crc:08x}")
             want = self.session.last_uploaded_crc
-            if want is not None and want != crc:
-                self.crc_warning.setText(f"ACTIVE PARAMETER TABLE {crc:08x} IS NOT THE ONE LAST "
-                                         f"UPLOADED ({want:08x})")
-                self.crc_warning.setStyleSheet("background:#c62828; color:white; font-weight:bold; padding:4px;")
-            else:
-                self.crc_warning.setText("")
-                self.crc_warning.setStyleSheet("")
+            self._set_crc_warning(
+                f"ACTIVE PARAMETER TABLE {crc:08x} IS NOT THE ONE LAST UPLOADED ({want:08x})"
+                if want is not None and want != crc else "")
         states = self.session.limits.snapshot()
         self.limits.setRowCount(len(states))
         for row, st in enumerate(states):
@@ -260,9 +257,22 @@ class StatusPanel(QWidget):
                 + t.verticalScrollBar().sizeHint().width() + 24)
 
     def _set(self, name: str, text: str, colour: str = "") -> None:
+        # only on a change: the panel refreshes ten times a second, and every style sheet
+        # set (even the same one) re-polishes the label and lays the main window out again
+        if self._shown.get(name) == (text, colour):
+            return
+        self._shown[name] = (text, colour)
         lab = self.fields[name]
         lab.setText(text)
         lab.setStyleSheet(f"color:{colour}; font-weight:bold;" if colour else "")
+
+    def _set_crc_warning(self, text: str) -> None:
+        if self._shown.get("crc_warning") == (text, ""):
+            return
+        self._shown["crc_warning"] = (text, "")
+        self.crc_warning.setText(text)
+        self.crc_warning.setStyleSheet(
+            "background:#c62828; color:white; font-weight:bold; padding:4px;" if text else "")
 
 
 class CommandPanel(QWidget):
