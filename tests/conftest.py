@@ -7,6 +7,7 @@ import time
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 
+import numpy as np
 import pytest
 
 from groundstation.dictionary import load_dictionary
@@ -34,6 +35,26 @@ def collect(client):
 
 def frames_of(blocks, name):
     return sum(len(b) for b in blocks if b.name == name)
+
+
+class HighRateFeeder:
+    """HIGH_RATE frames through encode -> StreamDeframer -> store(block), as a live link
+    delivers them: feed(seq, **columns) with seq the sequence numbers (also the ticks)."""
+
+    def __init__(self, dictionary, store):
+        from groundstation.codec import FrameCodec, StreamDeframer
+
+        self.codec = FrameCodec(dictionary)
+        self.deframer = StreamDeframer(self.codec)
+        self.store = store
+
+    def __call__(self, seq, host_time: float = 1.7e9, **values):
+        seq = np.asarray(seq)
+        data = self.codec.encode("HIGH_RATE", values, seq, seq)
+        for block in self.deframer.feed(data, host_time):
+            self.store(block)
+
+    high_rate = __call__
 
 
 @pytest.fixture(autouse=True)

@@ -9,24 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from groundstation.codec import FrameCodec, StreamDeframer
 from groundstation.display_buffers import TelemetryStore
 from groundstation.gui.chart_autoscale import EDGE, nice_range, nice_step, sticky_range
 from groundstation.gui.charts import StripChartPanel
 
+from conftest import HighRateFeeder
+
 RATE = 1200.0
-
-
-class Feeder:
-    def __init__(self, dictionary, store):
-        self.codec = FrameCodec(dictionary)
-        self.deframer = StreamDeframer(self.codec)
-        self.store = store
-
-    def __call__(self, seq, **values):
-        data = self.codec.encode("HIGH_RATE", values, seq, seq)
-        for block in self.deframer.feed(data, 1.7e9):
-            self.store(block)
 
 
 @pytest.fixture
@@ -63,7 +52,7 @@ def test_sticky_range_keeps_until_the_data_leave_or_shrink():
 
 
 def test_autoscaled_y_range_holds_while_the_data_stay_inside(panel, dictionary):
-    feed = Feeder(dictionary, panel.store)
+    feed = HighRateFeeder(dictionary, panel.store)
     panel.add_channel("HIGH_RATE.error_angle")
     panel.set_window_seconds(5.0)
     rng = np.random.default_rng(2)
@@ -92,7 +81,7 @@ def test_autoscaled_y_range_holds_while_the_data_stay_inside(panel, dictionary):
 
 # ---------------------------------------------------------------- time axis
 def test_live_time_axis_stays_put_and_times_stay_absolute(panel, dictionary):
-    feed = Feeder(dictionary, panel.store)
+    feed = HighRateFeeder(dictionary, panel.store)
     panel.add_channel("HIGH_RATE.error_angle")
     panel.add_channel("HIGH_RATE.encoder_outer", 1)
     panel.set_window_seconds(2.0)

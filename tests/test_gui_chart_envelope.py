@@ -10,10 +10,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from groundstation.codec import FrameCodec, StreamDeframer
 from groundstation.display_buffers import (PYRAMID_BLOCKS, TelemetryStore, aligned_envelope,
                                            bin_factor)
 from groundstation.gui.charts import StripChartPanel
+
+from conftest import HighRateFeeder
 
 RATE = 1200.0
 
@@ -42,25 +43,13 @@ def brute_force(number, t, y, t0, t1, bins, before=True):
     return np.array(xs), np.array(ps), per
 
 
-class Feeder:
-    def __init__(self, dictionary, store):
-        self.codec = FrameCodec(dictionary)
-        self.deframer = StreamDeframer(self.codec)
-        self.store = store
-
-    def __call__(self, seq, **values):
-        data = self.codec.encode("HIGH_RATE", values, seq, seq)
-        for block in self.deframer.feed(data, 1.7e9):
-            self.store(block)
-
-
 def test_pyramid_envelope_equals_brute_force_at_every_window_position(dictionary):
     """Blocks of random size stream into a ring that wraps several times; after each
     block the envelope of the newest window (and of windows ending earlier, as a paused
     or zoomed chart asks) equals the brute-force min/max of the raw samples."""
     store = TelemetryStore(dictionary, seconds=8.0)            # 10,080 HIGH_RATE samples
     ring = store.ring("HIGH_RATE")
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     rng = np.random.default_rng(11)
     history_t, history_y, history_n = [], [], []
     seq, number = 0, 0
@@ -102,7 +91,7 @@ def test_nan_in_a_bin_is_kept_as_in_np_min(dictionary):
     level of the pyramid, as np.min over the bin does: the line breaks, nothing is made up."""
     store = TelemetryStore(dictionary, seconds=60.0)
     ring = store.ring("HIGH_RATE")
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     y = np.cos(np.arange(60_000) / 500.0)
     y[33_333] = np.nan
     for a in range(0, 60_000, 1000):
@@ -119,7 +108,7 @@ def test_nan_in_a_bin_is_kept_as_in_np_min(dictionary):
 def test_aligned_envelope_of_frozen_data_matches_the_ring(dictionary):
     store = TelemetryStore(dictionary, seconds=10.0)
     ring = store.ring("HIGH_RATE")
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     rng = np.random.default_rng(3)
     for a in range(0, 30_000, 777):
         feed(np.arange(a, a + 777), error_angle=rng.standard_normal(777))
@@ -154,7 +143,7 @@ def test_drawn_curve_is_the_brute_force_envelope_as_the_window_scrolls(panel, di
     at every step the curve handed to pyqtgraph is the brute-force min/max envelope of
     the raw samples in the window, and a spike stays visible while it is in the window."""
     store = panel.store
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     panel.add_channel("HIGH_RATE.error_angle")
     panel.set_window_seconds(20.0)
     rng = np.random.default_rng(5)
@@ -189,7 +178,7 @@ def test_drawn_curve_is_the_brute_force_envelope_as_the_window_scrolls(panel, di
 def test_nothing_new_nothing_redrawn(panel, dictionary):
     """The timer redraws a live chart only when a shown packet got data or a setting
     changed (a stopped link or replay costs no redraws)."""
-    feed = Feeder(dictionary, panel.store)
+    feed = HighRateFeeder(dictionary, panel.store)
     feed(np.arange(2400), error_angle=np.zeros(2400))
     panel.add_channel("HIGH_RATE.error_angle")
     calls = []

@@ -11,29 +11,16 @@ import pytest
 from PySide6.QtCore import QMimeData, QPointF, Qt
 from PySide6.QtGui import QDropEvent
 
-from groundstation.codec import FrameCodec, StreamDeframer
+from groundstation.codec import StreamDeframer
 from groundstation.gui.channel_tree import ChannelTree, display_unit, format_value
 from groundstation.gui.charts import StripChartPanel
 from groundstation.gui.spectrum import SpectrumView, welch_psd
 from groundstation.sim import SimulatedDevice
 from groundstation.display_buffers import TelemetryStore
 
+from conftest import HighRateFeeder
+
 RATE = 1200.0
-
-
-class Feeder:
-    """Frames through encode → StreamDeframer → store, as a live link delivers them."""
-
-    def __init__(self, dictionary, store):
-        self.codec = FrameCodec(dictionary)
-        self.deframer = StreamDeframer(self.codec)
-        self.store = store
-
-    def high_rate(self, seq, host_time=1.7e9, **values):
-        seq = np.asarray(seq)
-        data = self.codec.encode("HIGH_RATE", values, seq, seq)
-        for block in self.deframer.feed(data, host_time):
-            self.store(block)
 
 
 def simulated(dictionary, store, seconds):
@@ -126,7 +113,7 @@ def test_panel_draws_store_data_over_the_window(panel, store, dictionary):
 
 def test_one_sample_spike_survives_ten_minutes(qtbot, dictionary):
     store = TelemetryStore(dictionary, seconds=600.0)
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     n = int(600 * RATE)
     spike_at = 456_789
     for start in range(0, n, 120_000):
@@ -149,7 +136,7 @@ def test_one_sample_spike_survives_ten_minutes(qtbot, dictionary):
 
 
 def test_gap_breaks_the_line_and_is_marked(panel, store, dictionary):
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     feed.high_rate(np.arange(0, 600), encoder_outer=np.full(600, 1e-4))
     feed.high_rate(np.arange(610, 1200), encoder_outer=np.full(590, 1e-4))   # 10 lost
     panel.add_channel("HIGH_RATE.encoder_outer")
@@ -166,7 +153,7 @@ def test_gap_breaks_the_line_and_is_marked(panel, store, dictionary):
 
 
 def test_paused_view_does_not_change_while_data_arrives(panel, store, dictionary):
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     feed.high_rate(np.arange(0, 2400), encoder_outer=np.arange(2400) * 1e-7)
     panel.add_channel("HIGH_RATE.encoder_outer")
     panel.set_window_seconds(1.0)
@@ -233,7 +220,7 @@ def test_drop_move_and_menu(panel, store, dictionary):
 
 
 def test_cursor_readout_and_host_timebase(panel, store, dictionary):
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     host0 = 1.7e9
     for k in range(10):                        # 100-frame datagrams arriving 5 ms late
         seq = np.arange(k * 100, (k + 1) * 100)
@@ -256,7 +243,7 @@ def test_cursor_readout_and_host_timebase(panel, store, dictionary):
 
 
 def test_axis_labels_use_si_prefixes_for_si_units(panel, store, dictionary, qtbot):
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     seq = np.arange(1200)
     feed.high_rate(seq, error_angle=20e-6 * np.sin(seq / 50), torque_coarse_cmd=np.sin(seq / 50))
     panel.set_layout([["HIGH_RATE.error_angle"], ["HIGH_RATE.torque_coarse_cmd"]])
@@ -278,7 +265,7 @@ def test_axis_labels_use_si_prefixes_for_si_units(panel, store, dictionary, qtbo
 
 # ---------------------------------------------------------------- spectrum
 def test_spectrum_of_a_sine_peaks_at_its_frequency(qtbot, store, dictionary):
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     seq = np.arange(int(10 * RATE))
     amplitude, f0 = 50e-6, 37.0
     feed.high_rate(seq[:6000], error_angle=amplitude * np.sin(2 * np.pi * f0 * seq[:6000] / RATE))
@@ -321,7 +308,7 @@ def test_redrawing_keeps_references_to_none(panel, store, dictionary, qtbot):
 
 
 def test_timer_redraws_only_while_visible(panel, store, dictionary, qtbot):
-    feed = Feeder(dictionary, store)
+    feed = HighRateFeeder(dictionary, store)
     feed.high_rate(np.arange(1200), encoder_outer=np.zeros(1200))
     panel.add_channel("HIGH_RATE.encoder_outer")
     right_edge = lambda: panel.plots[0].x_range()[1]        # noqa: E731

@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from groundstation.codec import FrameCodec, StreamDeframer
 from groundstation.gui.panels import StatusPanel
 from groundstation.gui.session import Session
+
+from conftest import HighRateFeeder
 
 
 def test_unchanged_status_sets_no_label_and_a_change_shows(qtbot, dictionary, tmp_path):
@@ -15,13 +16,8 @@ def test_unchanged_status_sets_no_label_and_a_change_shows(qtbot, dictionary, tm
     panel = StatusPanel(session)
     qtbot.addWidget(panel)
     panel._timer.stop()                               # the test refreshes by hand
-    codec, deframer = FrameCodec(dictionary), StreamDeframer(FrameCodec(dictionary))
+    feed = HighRateFeeder(dictionary, session.store)
     mode = dictionary.packet("HIGH_RATE").item_by_name["mode"].states      # name -> value
-
-    def feed(seq, **values):
-        for block in deframer.feed(codec.encode("HIGH_RATE", values, seq, seq), 1.7e9):
-            session.store(block)
-
     seq = np.arange(0, 10)
     feed(seq, mode=np.full(10, mode["IDLE"]), armed=np.zeros(10), fault=np.zeros(10))
     sets = []
