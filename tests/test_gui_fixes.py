@@ -137,7 +137,9 @@ def test_demo_moves_the_simulated_axis_and_esc_stops_it(qtbot, window):
 
     # again, and Esc in the middle of the step: ABORT, the rig safe, the demo stopped
     window.demo_action.trigger()
-    qtbot.waitUntil(lambda: demo.state == "playing", timeout=30000)
+    assert demo.state == "uploading", demo.text
+    qtbot.waitUntil(lambda: demo.state != "uploading", timeout=30000)
+    assert demo.state == "playing", demo.text
     start = ring(window).latest("encoder_inner")
     qtbot.waitUntil(lambda: ring(window).latest("armed") == 1
                     and ring(window).latest("encoder_inner") - start > 0.5e-3, timeout=20000)
@@ -150,6 +152,23 @@ def test_demo_moves_the_simulated_axis_and_esc_stops_it(qtbot, window):
     qtbot.waitUntil(lambda: not window.session.profile_playing, timeout=10000)
     assert "aborted" in window.demo_status.text().lower()
     assert "ABORT" in window.demo_status.toolTip()
+
+
+def test_demo_is_offered_only_once_the_telemetry_shows_the_drives_disarmed(qtbot, window):
+    connect(qtbot, window)
+    qtbot.waitUntil(lambda: window.demo_action.isEnabled(), timeout=10000)
+    window.session.command("SET_MODE", mode="OPEN_LOOP")
+    window.session.command("ARM")
+    qtbot.waitUntil(lambda: ring(window).latest("armed") == 1, timeout=10000)
+    qtbot.waitUntil(lambda: not window.demo_action.isEnabled(), timeout=5000)
+    assert "disarm first" in window.demo_action.toolTip()
+    # a click anyway (e.g. from the menu's shortcut) is refused: nothing is sent
+    sent = sent_commands(window)
+    assert "disarm first" in (window.demo.start() or "")
+    assert window.demo.state == "idle" and not sent
+    window.session.command("DISARM")
+    qtbot.waitUntil(lambda: ring(window).latest("armed") == 0, timeout=10000)
+    qtbot.waitUntil(lambda: window.demo_action.isEnabled(), timeout=5000)
 
 
 def test_demo_escape_during_the_upload_plays_nothing(qtbot, window):

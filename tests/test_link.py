@@ -427,6 +427,20 @@ def test_udp_batches_keep_each_datagrams_arrival_time():
     rx = UdpReceiver("127.0.0.1", 0)
     tx = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     try:
+        if rx.kernel_timestamps:
+            # Linux switches arrival stamping on a moment after the first socket asks for
+            # it (deferred work); until then it stamps a datagram when it is read.  Probe
+            # until a stamp predates our own read of the clock after readiness, i.e. the
+            # kernel stamps on arrival (bounded: a few hundred probes at most).
+            for _ in range(500):
+                tx.sendto(b"probe", (rx.host, rx.port))
+                assert select.select([rx._sock], [], [], 10.0)[0]
+                ready_at = time.time()
+                _, probe_times = rx.receive(1.0)
+                if probe_times[0] <= ready_at:
+                    break
+            else:
+                raise AssertionError("the kernel never stamped a datagram on arrival")
         sent_at = time.time()
         tx.sendto(bytes([0]) * 10, (rx.host, rx.port))
         # the first datagram has certainly arrived once the socket is readable (on a busy

@@ -25,7 +25,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
-from PySide6.QtCore import QObject, Signal
+from PySide6.QtCore import QObject, QTimer, Signal
 
 from ..params import table as ptable
 from ..params.upload import UploadRecord
@@ -104,6 +104,15 @@ class DemoController(QObject):
         #: an upload of ours is still on its worker thread (even after an abort): no new
         #: demo until it has ended, so two uploads never overlap
         self._upload_pending = False
+        # the drives' armed flag comes with the telemetry, not with a signal: looked at ten
+        # times a second, so the button is offered only once the device shows them disarmed
+        # (right after a profile's DISARM is acknowledged, the newest frame may still say
+        # armed - a click then would only be refused)
+        self._armed_seen = False
+        self._armed_poll = QTimer(self)
+        self._armed_poll.setInterval(100)
+        self._armed_poll.timeout.connect(self._poll_armed)
+        self._armed_poll.start()
         session.sig_params_uploaded.connect(self._on_uploaded)
         session.sig_params_failed.connect(self._on_params_failed)
         session.sig_profile_done.connect(self._on_profile_done)
@@ -143,6 +152,8 @@ class DemoController(QObject):
                     "it (see docs/controllers.md); choose relative_2dof or rigid_1dof")
         if self.running:
             return "the demo is running (Esc stops it)"
+        if self._drives_armed():
+            return "the drives are armed: disarm first (Ctrl+D); the table changes only disarmed"
         if self._upload_pending:
             return "the last parameter upload is still finishing"
         if s.profile_playing:
@@ -150,6 +161,16 @@ class DemoController(QObject):
         if s.campaign.running:
             return "a campaign is running: it owns the device until it ends"
         return ""
+
+    def _drives_armed(self) -> bool:
+        ring = self.session.store.rings.get("HIGH_RATE")
+        return bool(ring is not None and ring.latest("armed"))
+
+    def _poll_armed(self) -> None:
+        armed = self._drives_armed()
+        if armed != self._armed_seen:
+            self._armed_seen = armed
+            self.update_availability()
 
     def update_availability(self) -> None:
         reason = self.unavailable_reason()
@@ -159,8 +180,6 @@ class DemoController(QObject):
     def start(self) -> str | None:
         """Start the demo; returns why not (nothing sent), else None."""
         reason = self.unavailable_reason()
-        if not reason and self.session.store.ring("HIGH_RATE").latest("armed"):
-            reason = "the drives are armed: disarm first (Ctrl+D); the table changes only disarmed"
         if reason:
             self.sig_state.emit("refused", reason)
             return reason
