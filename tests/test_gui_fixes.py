@@ -104,6 +104,51 @@ def test_mode_box_follows_the_device_and_sends_nothing(qtbot, window):
     assert sent.count("SET_MODE") == 1 and sent.count("FRICTION_COMP") == 1 and "ABORT" in sent
 
 
+# ---------------------------------------------------------------------------- command order
+FINAL_STAGES = ("COMPLETED", "REJECTED", "FAILED", "TIMEOUT", "CANCELLED")
+
+
+def final_stages(win) -> list[tuple[str, str]]:
+    """How each command sent from now on ended: the client's report of a command it sent
+    (with its sequence number), or the Session's CANCELLED for one it never sent (the
+    per-stage reports, without a sequence number, are left out)."""
+    out: list[tuple[str, str]] = []
+
+    def seen(name, seq, stage, _reason):
+        if (seq and stage in FINAL_STAGES and name != "HEARTBEAT") or (not seq and stage == "CANCELLED"):
+            out.append((name, stage))
+    win.session.sig_command.connect(seen)
+    return out
+
+
+def test_commands_go_out_in_the_order_given_and_abort_drops_what_waits(qtbot, window):
+    connect(qtbot, window)
+    ended = final_stages(window)
+    sent = sent_commands(window)
+    # given at once: the ARM must not overtake the SET_MODE (it would be refused in IDLE)
+    window.session.command("SET_MODE", mode="OPEN_LOOP")
+    window.session.command("ARM")
+    qtbot.waitUntil(lambda: len(ended) >= 2, timeout=20000)
+    assert ended == [("SET_MODE", "COMPLETED"), ("ARM", "COMPLETED")]
+    assert sent == ["SET_MODE", "ARM"]
+    qtbot.waitUntil(lambda: ring(window).latest("armed") == 1, timeout=10000)
+
+    # a queue of commands, then ABORT: whatever had not gone out yet is dropped
+    ended.clear()
+    queued = 30
+    for i in range(queued):
+        window.session.command("SET_CURRENTS", current_coarse=0.001 * (i % 3), current_fine=0.0)
+    window.session.abort()
+    qtbot.waitUntil(lambda: len(ended) >= queued + 1, timeout=30000)
+    assert len(ended) == queued + 1, ended
+    stages = dict.fromkeys(ended)
+    assert ("ABORT", "COMPLETED") in stages
+    assert all(stage in ("COMPLETED", "CANCELLED", "REJECTED") for _, stage in ended)
+    assert sent.count("SET_CURRENTS") + sum(s == "CANCELLED" for _, s in ended) == queued
+    qtbot.waitUntil(lambda: ring(window).latest("armed") == 0 and ring(window).latest("mode") == 0
+                    and ring(window).latest("current_coarse") == 0.0, timeout=10000)
+
+
 # ---------------------------------------------------------------------------- demo
 def test_demo_moves_the_simulated_axis_and_esc_stops_it(qtbot, window):
     demo = window.demo
@@ -157,7 +202,9 @@ def test_demo_moves_the_simulated_axis_and_esc_stops_it(qtbot, window):
 def test_demo_is_offered_only_once_the_telemetry_shows_the_drives_disarmed(qtbot, window):
     connect(qtbot, window)
     qtbot.waitUntil(lambda: window.demo_action.isEnabled(), timeout=10000)
+    # each command goes on its own worker thread: the ARM only once the mode shows
     window.session.command("SET_MODE", mode="OPEN_LOOP")
+    qtbot.waitUntil(lambda: window.status_panel.fields["mode"].text() == "OPEN_LOOP", timeout=10000)
     window.session.command("ARM")
     qtbot.waitUntil(lambda: ring(window).latest("armed") == 1, timeout=10000)
     qtbot.waitUntil(lambda: not window.demo_action.isEnabled(), timeout=5000)

@@ -109,6 +109,10 @@ class Session(ConsoleMixin, QObject):
         self._want_connected = False
         self._closing = False
         self._workers: list[threading.Thread] = []
+        #: operator commands waiting for the sender thread, in order: (name, work)
+        self._command_queue: list[tuple[str, Any]] = []
+        self._command_lock = threading.Lock()
+        self._command_sender = False
         self._attempt = 0
         self._reconnect = QTimer(self)
         self._reconnect.setSingleShot(True)
@@ -317,7 +321,12 @@ class Session(ConsoleMixin, QObject):
 
     # ------------------------------------------------------------------ commands
     def command(self, name: str, **args: Any) -> None:
-        """Send a command on a worker thread; stages arrive as sig_command."""
+        """Send a command off the GUI thread; stages arrive as sig_command.
+
+        Commands go out one after another in the order given (SET_MODE then ARM must not
+        overtake each other on two threads).  ABORT overtakes them all: it is sent at
+        once on its own thread, and what was still waiting is dropped (CANCELLED) - an
+        ARM queued before an Esc must not follow the ABORT."""
         client = self.client
         if client is None:
             self.sig_command.emit(name, "", "REFUSED", "not connected")
@@ -331,7 +340,29 @@ class Session(ConsoleMixin, QObject):
                 client.command(name, on_stage=stage, **args)
             except GroundStationError as exc:
                 self.sig_event.emit("ERROR", "command", str(exc))
-        self._worker(work, f"gs-cmd-{name}")
+        if name == "ABORT":
+            with self._command_lock:
+                dropped, self._command_queue = self._command_queue, []
+            for queued_name, _ in dropped:
+                self.sig_command.emit(queued_name, "", "CANCELLED", "ABORT sent before it")
+            self._worker(work, "gs-cmd-ABORT")
+            return
+        with self._command_lock:
+            self._command_queue.append((name, work))
+            if self._command_sender:
+                return                  # the running sender takes it in turn
+            self._command_sender = True
+        self._worker(self._send_commands, "gs-commands")
+
+    def _send_commands(self) -> None:
+        """The one sender of queued commands: runs until the queue is empty."""
+        while True:
+            with self._command_lock:
+                if not self._command_queue:
+                    self._command_sender = False
+                    return
+                _, work = self._command_queue.pop(0)
+            work()
 
     def abort(self) -> None:
         """ABORT now, whatever the state: the generator's outputs off (fail safe, even
