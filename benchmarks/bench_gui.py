@@ -258,8 +258,15 @@ class Phase:
         self.overruns0 = ctx.sim_overruns()
         self.lat0 = len(ctx.probe.samples)
         self.ref0 = len(ctx.refresh.samples)
+        self.client = ctx.session.client
+        self.client_changes = 0
 
     def sample(self) -> None:
+        # a reconnect mid-phase (a new client) is counted and followed, not missed
+        if self.ctx.session.client is not self.client and self.ctx.session.client is not None:
+            self.client_changes += 1
+            self.client = self.ctx.session.client
+            self.ctx.count_on_client()
         s = self.ctx.window.charts.stats
         self.fps.append(s.fps)
         self.refresh_ms_last.append(s.last_refresh_ms)
@@ -330,6 +337,7 @@ class Phase:
             "sim_overruns": (overruns1 - self.overruns0
                              if overruns1 is not None and self.overruns0 is not None else None),
             "recorder_discarded_blocks": ctx.discarded() - self.discarded0,
+            "client_changes": self.client_changes,
         }
 
 
@@ -431,20 +439,27 @@ class Bench:
         print(f"burst: starting a simulator at {a.burst_speed:g}x", flush=True)
         self.burst_sim = SimulatorProcess(testbed=str(TESTBED), speed=a.burst_speed)
         address = self.burst_sim.start()           # ~1 s, not measured
-        old_sim = self.session.sim
-        self.session.connect_address(address)
-        if not wait(30.0, self.link_up):
-            raise SystemExit(f"the window did not connect to the burst simulator {address}")
-        # Workarounds for the session (see the report): a new client gets no recorder,
-        # the store keeps the old device's (later) device times, and the first simulator
-        # keeps running after a switch away from "sim".
-        if self.session.recorder is not None:
-            attach_recorder(self.session.client, self.session.recorder)
-        if not a.keep_store:
-            self.session.store.clear()
+        old_sim, old_client = self.session.sim, self.session.client
+        # First end the old link and wait until its client is closed, then stop the old
+        # simulator, then connect: a client that is still closing when its simulator
+        # stops reports "lost", and the session then "reconnects" - to the new address,
+        # taking the new client's session over in the middle of the burst (seen:
+        # the counter stayed on the replaced client and saw 400-800 ticks a wall second).
+        self.session.disconnect_link()
+        wait(10.0, lambda: old_client is None or old_client.link_state != "up")
         if old_sim is not None and self.session.sim is old_sim:
             self.session.sim = None
             old_sim.stop()
+        wait(0.3)                                  # queued link signals of the old client
+        self.session.connect_address(address)
+        if not wait(30.0, self.link_up):
+            raise SystemExit(f"the window did not connect to the burst simulator {address}")
+        # The session attaches its recorder to a new client itself (older revisions did
+        # not); the store keeps the old device's (later) device times.
+        if self.session.recorder is not None and getattr(self.session, "_detach_recorder", None) is None:
+            attach_recorder(self.session.client, self.session.recorder)
+        if not a.keep_store:
+            self.session.store.clear()
         self.count_on_client()
         self.sim_pid = self.burst_sim.proc.pid if self.burst_sim.proc else None
         wait(0.5)
@@ -543,6 +558,10 @@ def print_table(res: dict) -> None:
         print(f"\nWARNING: other processes used up to {busy:.0f} % CPU (100 % = one core, "
               f"{s['machine_cores']} cores) during the run: the figures are not those of a "
               f"quiet machine.")
+    for r, name in ((s, "steady"), (b, "burst")):
+        if r.get("client_changes"):
+            print(f"\nWARNING: the session replaced its client {r['client_changes']} time(s) during "
+                  f"the {name} phase (a reconnect): its link figures are the last client's.")
     rec = res["recording"]
     print(f"\nrecording: {rec['state']}, {rec['frames']} frames, "
           f"{(rec['bytes'] or 0) / 1e6:.1f} MB, discarded blocks {rec['discarded_blocks']}")

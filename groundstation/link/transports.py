@@ -210,6 +210,8 @@ class UdpReceiver:
         self.datagrams = 0
         self.bytes_read = 0
         self.closed = False
+        #: the last receive_from() stopped at max_datagrams: more were waiting
+        self.backlog = False
 
     def _recv(self) -> tuple[bytes, float, tuple[str, int]]:
         if not self.kernel_timestamps:
@@ -236,7 +238,11 @@ class UdpReceiver:
         1200 Hz stream is handled in batches of about 1200*coalesce_s frames: each wake-up
         of the reader costs the same interpreter time whatever it carries, and in the
         GUI process that time is taken from the event loop.  Arrival times are the
-        kernel's, so batching does not change the measured latency."""
+        kernel's, so batching does not change the measured latency.  After a call that
+        stopped at max_datagrams (more were waiting: a backlog) the next one does not
+        wait: with the wait, a stream faster than max_datagrams / coalesce_s (512 per
+        25 ms, less whatever handing them on takes) could never be caught up with and
+        would overflow the socket's buffer."""
         out: list[bytes] = []
         times: list[float] = []
         sources: list[tuple[str, int]] = []
@@ -252,7 +258,7 @@ class UdpReceiver:
         out.append(data)
         times.append(when)
         sources.append(addr)
-        if coalesce_s > 0:
+        if coalesce_s > 0 and not self.backlog:
             time.sleep(coalesce_s)
         try:
             self._sock.setblocking(False)
@@ -263,6 +269,7 @@ class UdpReceiver:
                 sources.append(addr)
         except (BlockingIOError, OSError):
             pass                        # drained (or closed meanwhile: the next call says so)
+        self.backlog = len(out) >= max_datagrams
         self.datagrams += len(out)
         self.bytes_read += sum(len(d) for d in out)
         return out, times, sources
