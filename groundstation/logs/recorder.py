@@ -103,7 +103,10 @@ class Recorder:
                  queue_blocks: int = 20000, link_stats: Callable[[], Any] | None = None,
                  on_failure: Callable[[str], None] | None = None,
                  on_flush: Callable[["RecorderStatus", float | None], None] | None = None,
-                 compression: dict | None = None):
+                 compression: dict | None = None, chunk_rows: int | None = None):
+        """`chunk_rows`: rows per HDF5 chunk of the per-frame datasets (None: the
+        schema's CHUNK_ROWS, sized for a live link; a fast campaign passes
+        schema.FAST_CHUNK_ROWS)."""
         self.d = dictionary
         self.folder = Path(folder)
         self.test_name = test_name
@@ -111,7 +114,8 @@ class Recorder:
                        "testbed_text": testbed_text, "testbed_name": testbed_name,
                        "testbed_path": testbed_path, "flush_interval_s": flush_interval_s,
                        "rollover_bytes": rollover_bytes, "rollover_seconds": rollover_seconds,
-                       "folder": str(self.folder), "compression": compression}
+                       "folder": str(self.folder), "compression": compression,
+                       "chunk_rows": chunk_rows}
         self.queue_blocks = queue_blocks
         self.link_stats = link_stats
         self.on_failure = on_failure

@@ -59,7 +59,8 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
     def open_file(path: Path, run: int) -> LogFile:
         f = LogFile(path, d, test_name=config["test_name"], run=run, notes=config["notes"],
                     testbed_text=config["testbed_text"], testbed_name=config["testbed_name"],
-                    testbed_path=config["testbed_path"], compression=config.get("compression"))
+                    testbed_path=config["testbed_path"], compression=config.get("compression"),
+                    chunk_rows=config.get("chunk_rows"))
         f.journal([(time.time(), "recorder", {"action": "started", "file": path.name,
                                               "run": run, "test_name": config["test_name"]}, b"")])
         f.flush()

@@ -37,11 +37,15 @@ class RecordingSlot:
         return self.recorder is not None
 
     def start(self, client, dictionary, testbed, folder: Path, name: str, notes: str = "",
-              on_failure: Callable[[str], None] | None = None) -> Path:
+              on_failure: Callable[[str], None] | None = None,
+              chunk_rows: int | None = None) -> Path:
+        """`chunk_rows`: the log's HDF5 chunking (Recorder); a fast session passes
+        schema.FAST_CHUNK_ROWS."""
         assert self.recorder is None, "one recording at a time (the Station checks)"
         rec = Recorder(dictionary, folder, test_name=name, notes=notes,
                        testbed_text=testbed.path.read_text(), testbed_name=testbed.name,
-                       testbed_path=str(testbed.path), on_failure=on_failure)
+                       testbed_path=str(testbed.path), on_failure=on_failure,
+                       chunk_rows=chunk_rows)
         path = rec.start()
         try:
             if client is not None:
