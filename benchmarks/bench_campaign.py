@@ -14,8 +14,9 @@ Side by side, in one run, repeated (--rounds, interleaved; medians):
              or recorded (the same engine and firmware: bench_sim.py's figure)
 
 Where the wall time goes (--profile): per phase, the simulator's own time (engine,
-firmware, frame encoding; wall and the thread's CPU time), sending, and the clock's waits
-for credits.  Each round's ratios to the simulator alone (measured at the start of the
+firmware, frame encoding; wall and the thread's CPU time), sending, the clock's waits
+for credits, and the CPU time of the other threads of this process (the receiver, the
+queue's feeder to the log writer) and of the log writer process (Linux: from /proc).  Each round's ratios to the simulator alone (measured at the start of the
 round) are printed, and their medians.
 
 Run: .venv/bin/python benchmarks/bench_campaign.py [--rounds 3] [--profile]
@@ -27,6 +28,7 @@ import argparse
 import os
 import statistics
 import tempfile
+import threading
 import time
 from collections import Counter
 from pathlib import Path
@@ -60,11 +62,23 @@ def simulator_alone(seconds: float) -> tuple[float, float]:
     return seconds / (time.perf_counter() - t0), time.thread_time() - c0
 
 
+def _cpu_of(stat: Path) -> float:
+    """utime + stime of a /proc stat file, s (0 when it cannot be read)."""
+    try:
+        fields = stat.read_text().rsplit(")", 1)[1].split()
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    except (OSError, IndexError, ValueError):
+        return 0.0
+
+
 class _Timers:
     """Wall time inside the device's simulate and send, for --profile (wraps the methods
-    of one SimulatedDevice instance)."""
+    of one SimulatedDevice instance); CPU time of this process's other threads and of
+    the log writer process."""
 
-    def __init__(self, device) -> None:
+    def __init__(self, device, tb) -> None:
+        self.tb = tb
+        self.cpu0 = self._cpus()
         self.t: Counter = Counter()
         for name in ("_simulate", "_send_telemetry"):
             fn = getattr(device, name)
@@ -80,11 +94,30 @@ class _Timers:
                 self.t[name + " cpu"] += time.thread_time() - c0
         return wrapper
 
+    def _cpus(self) -> dict[str, float]:
+        """CPU seconds so far: the receiver thread, every other thread of this process
+        but the main one, and the log writer process."""
+        out = {"receiver": 0.0, "other threads": 0.0, "writer": 0.0}
+        for t in threading.enumerate():
+            if t is threading.main_thread() or t.native_id is None:
+                continue
+            key = "receiver" if t.name == "gs-udp-reader" else "other threads"
+            out[key] += _cpu_of(Path(f"/proc/self/task/{t.native_id}/stat"))
+        rec = self.tb.recording.recorder
+        proc = getattr(rec, "_proc", None)
+        if proc is not None and proc.pid is not None:
+            out["writer"] = _cpu_of(Path(f"/proc/{proc.pid}/stat"))
+        return out
+
     def take(self, clock) -> dict[str, float]:
         # simulate cpu: the thread's own CPU time in it; the rest of "simulate" is time the
         # thread waited for a core or for the interpreter (receiver, recorder, other load)
         out = {"simulate_s": self.t["_simulate"], "simulate cpu_s": self.t["_simulate cpu"],
                "send_s": self.t["_send_telemetry"], "clock_waits_s": clock.waited_s}
+        cpu = self._cpus()
+        for k, v in cpu.items():
+            out[f"{k} cpu_s"] = max(0.0, v - self.cpu0.get(k, 0.0))
+        self.cpu0 = cpu
         self.t.clear()
         clock.waited_s = 0.0
         return out
@@ -94,9 +127,9 @@ def campaign(tmp: str, pacing: FastPacing, between_steps: str, profile: bool) ->
     with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=True,
                  log_folder=tmp, history=Path(tmp) / "history", pacing=pacing,
                  between_steps=between_steps) as tb:
-        timers = _Timers(tb._device) if profile else None
         tb.upload_design(ROOT / "profiles" / "controllers" / "relative_design2.toml")
         tb.start_recording("bench")
+        timers = _Timers(tb._device, tb) if profile else None
         if timers:
             timers.take(tb.clock)
         t0 = time.perf_counter()
@@ -107,11 +140,14 @@ def campaign(tmp: str, pacing: FastPacing, between_steps: str, profile: bool) ->
         tb.dwell(60.0)
         t_dwell = time.perf_counter() - t0
         prof_dwell = timers.take(tb.clock) if timers else {}
+        t0 = time.perf_counter()
         rec = tb.stop_recording()
+        t_stop = time.perf_counter() - t0
     device_play = result.sample_count / 1200.0
     return {"play_x": device_play / t_play, "dwell_x": 60.0 / t_dwell, "play_wall_s": t_play,
             "dwell_wall_s": t_dwell, "profile_device_s": device_play, "frames": rec["frames"],
             "dropped": rec["dropped"], "discarded_blocks": rec["discarded_blocks"],
+            "stop_recording_s": t_stop,
             "profile_play": prof_play, "profile_dwell": prof_dwell}
 
 
@@ -143,7 +179,8 @@ def main() -> None:
                   f"{x['frames']} frames, {x['dropped']} dropped, "
                   f"{x['discarded_blocks']} discarded"
                   + (f"; dwell {x['dwell_wall_s']:.2f} s = {_fmt(x['profile_dwell'])}; profile "
-                     f"{x['play_wall_s']:.2f} s = {_fmt(x['profile_play'])}" if args.profile else ""))
+                     f"{x['play_wall_s']:.2f} s = {_fmt(x['profile_play'])}; stop_recording "
+                     f"{x['stop_recording_s']:.2f} s" if args.profile else ""))
     limit = statistics.median(limits)
     res: dict = {"machine": machine(), "load_average_end": os.getloadavg(), "rounds": args.rounds,
                  "simulator_alone_x_realtime": limit, "simulator_alone_rounds": limits}
