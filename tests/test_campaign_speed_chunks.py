@@ -1,10 +1,12 @@
 """A fast session's logs are chunked for the log writer's sake (FAST_CHUNK_ROWS: the
-fast simulator delivers thousands of frames a flush, docs/campaigns.md "Speed"); every
-other recording keeps the schema's CHUNK_ROWS.  Content is unaffected either way
+fast simulator delivers thousands of frames a flush, docs/campaigns.md "Speed"), and its
+writer process runs at a lower priority (FAST_WRITER_NICENESS); every other recording
+keeps the schema's CHUNK_ROWS and the usual priority.  Content is unaffected either way
 (tests/test_logs_chunking.py, tests/test_campaign_speed.py)."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import h5py
@@ -19,6 +21,9 @@ def test_fast_session_records_with_fast_chunks(tmp_path):
     with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=True,
                  log_folder=tmp_path) as tb:
         tb.start_recording("chunks")
+        writer = tb.recording.recorder._proc.pid
+        assert os.getpriority(os.PRIO_PROCESS, writer) == min(
+            19, os.getpriority(os.PRIO_PROCESS, 0) + schema.FAST_WRITER_NICENESS)
         tb.dwell(1.0)
         entry = tb.stop_recording()
     path = Path(entry["files"][0])

@@ -7,6 +7,7 @@ from the same simulated blocks: nothing depends on timing."""
 
 from __future__ import annotations
 
+import os
 import shutil
 from pathlib import Path
 
@@ -173,3 +174,22 @@ def test_recorder_passes_its_chunking_to_the_writer(dictionary, blocks, tmp_path
     assert chunks["telemetry/HIGH_RATE/tick"] == (512,)
     assert chunks["frames/HIGH_RATE/host_time"] == (512,)
     assert status.frames == sum(len(b) for b in blocks[:40])
+
+
+def test_recorder_lowers_its_writers_priority_when_asked(dictionary, tmp_path):
+    ours = os.getpriority(os.PRIO_PROCESS, 0)
+    rec = Recorder(dictionary, tmp_path, test_name="nice", writer_niceness=3)
+    rec.start()                 # returns once the writer has said it started: reniced by then
+    try:
+        assert os.getpriority(os.PRIO_PROCESS, rec._proc.pid) == min(19, ours + 3)
+    finally:
+        status = rec.stop()
+    assert status.state == "stopped"
+    plain = Recorder(dictionary, tmp_path, test_name="plain")
+    plain.start()
+    try:
+        assert os.getpriority(os.PRIO_PROCESS, plain._proc.pid) == ours
+    finally:
+        plain.stop()
+    with pytest.raises(ValueError, match="writer_niceness"):
+        Recorder(dictionary, tmp_path, writer_niceness=-1)

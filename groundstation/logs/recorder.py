@@ -103,10 +103,16 @@ class Recorder:
                  queue_blocks: int = 20000, link_stats: Callable[[], Any] | None = None,
                  on_failure: Callable[[str], None] | None = None,
                  on_flush: Callable[["RecorderStatus", float | None], None] | None = None,
-                 compression: dict | None = None, chunk_rows: int | None = None):
+                 compression: dict | None = None, chunk_rows: int | None = None,
+                 writer_niceness: int = 0):
         """`chunk_rows`: rows per HDF5 chunk of the per-frame datasets (None: the
         schema's CHUNK_ROWS, sized for a live link; a fast campaign passes
-        schema.FAST_CHUNK_ROWS)."""
+        schema.FAST_CHUNK_ROWS).  `writer_niceness` (>= 0) lowers the writer process's
+        scheduling priority by that much (os.nice): a fast campaign's simulator then
+        wins a contended core, and the writer works in what it leaves; the fast clock
+        still waits for the writer's queue, so nothing is discarded."""
+        if writer_niceness < 0:
+            raise ValueError(f"writer_niceness must be >= 0, not {writer_niceness!r}")
         self.d = dictionary
         self.folder = Path(folder)
         self.test_name = test_name
@@ -115,7 +121,7 @@ class Recorder:
                        "testbed_path": testbed_path, "flush_interval_s": flush_interval_s,
                        "rollover_bytes": rollover_bytes, "rollover_seconds": rollover_seconds,
                        "folder": str(self.folder), "compression": compression,
-                       "chunk_rows": chunk_rows}
+                       "chunk_rows": chunk_rows, "writer_niceness": writer_niceness}
         self.queue_blocks = queue_blocks
         self.link_stats = link_stats
         self.on_failure = on_failure

@@ -47,6 +47,9 @@ CHUNK_ROWS = 256
 # less writer CPU (docs/campaigns.md, "Speed"); a chunk rewritten at a flush is still
 # a small part of the thousands of rows written
 FAST_CHUNK_ROWS = 1024
+# the log writer's niceness in a fast campaign: on a contended machine the simulator
+# (which the writer waits for anyway) gets the core first
+FAST_WRITER_NICENESS = 10
 STREAM_CHUNK = 65536              # bytes per chunk of a byte stream
 
 JOURNAL_KINDS = ("note", "command", "event", "parameter_table", "profile",

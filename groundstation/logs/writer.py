@@ -51,6 +51,11 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
     # how the recording ends and tells it to close ("stop"); if the parent is gone, the
     # writer notices (below) and closes the file itself.
     ignore_terminal_interrupt()
+    if config.get("writer_niceness"):
+        try:
+            os.nice(config["writer_niceness"])
+        except OSError:        # not permitted here: the writer runs at the usual priority
+            pass
     d = load_dictionary(protocol_dir)
     codec = FrameCodec(d)
     parent = os.getppid()

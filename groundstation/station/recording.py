@@ -38,14 +38,15 @@ class RecordingSlot:
 
     def start(self, client, dictionary, testbed, folder: Path, name: str, notes: str = "",
               on_failure: Callable[[str], None] | None = None,
-              chunk_rows: int | None = None) -> Path:
-        """`chunk_rows`: the log's HDF5 chunking (Recorder); a fast session passes
-        schema.FAST_CHUNK_ROWS."""
+              chunk_rows: int | None = None, writer_niceness: int = 0) -> Path:
+        """`chunk_rows`, `writer_niceness`: the log's HDF5 chunking and the writer
+        process's priority (Recorder); a fast session passes schema.FAST_CHUNK_ROWS and
+        schema.FAST_WRITER_NICENESS."""
         assert self.recorder is None, "one recording at a time (the Station checks)"
         rec = Recorder(dictionary, folder, test_name=name, notes=notes,
                        testbed_text=testbed.path.read_text(), testbed_name=testbed.name,
                        testbed_path=str(testbed.path), on_failure=on_failure,
-                       chunk_rows=chunk_rows)
+                       chunk_rows=chunk_rows, writer_niceness=writer_niceness)
         path = rec.start()
         try:
             if client is not None:

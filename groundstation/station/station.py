@@ -45,7 +45,7 @@ from ..dictionary import Dictionary, load_dictionary
 from ..errors import GroundStationError
 from ..link import open_client
 from ..link.client import DeviceClient
-from ..logs.schema import FAST_CHUNK_ROWS
+from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
 from .recording import RecordingSlot
@@ -488,10 +488,12 @@ class Station:
         if self.recording.active:
             raise ScriptError(f"start_recording '{name}': '{self.recorder.test_name}' is still recording")
         # the fast simulator delivers thousands of frames a flush: larger chunks, fewer
-        # of them, for the log writer (logs/schema.py, FAST_CHUNK_ROWS)
-        chunk_rows = FAST_CHUNK_ROWS if isinstance(self.clock, SteppedClock) else None
+        # of them, for the log writer, whose process yields a contended core to the
+        # simulator (logs/schema.py, FAST_CHUNK_ROWS, FAST_WRITER_NICENESS)
+        fast = isinstance(self.clock, SteppedClock)
         path = self.recording.start(self.client, self.d, self.testbed, self.log_folder, name, notes,
-                                    chunk_rows=chunk_rows)
+                                    chunk_rows=FAST_CHUNK_ROWS if fast else None,
+                                    writer_niceness=FAST_WRITER_NICENESS if fast else 0)
         if isinstance(self.clock, SteppedClock):
             self.clock.tick_over()          # held device time: the log opens with telemetry
         return path
