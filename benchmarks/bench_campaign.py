@@ -96,11 +96,14 @@ class _Timers:
 
     def _cpus(self) -> dict[str, float]:
         """CPU seconds so far: the receiver thread, every other thread of this process
-        but the main one, and the log writer process."""
+        but the main one and the clock's (both run the simulator), and the log writer
+        process."""
         out = {"receiver": 0.0, "other threads": 0.0, "writer": 0.0}
         for t in threading.enumerate():
             if t is threading.main_thread() or t.native_id is None:
                 continue
+            if t.name == "gs-sim-idle-clock":      # runs the simulator while a profile plays
+                continue                            # (counted in simulate)
             key = "receiver" if t.name == "gs-udp-reader" else "other threads"
             out[key] += _cpu_of(Path(f"/proc/self/task/{t.native_id}/stat"))
         rec = self.tb.recording.recorder
