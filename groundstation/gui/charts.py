@@ -51,6 +51,7 @@ from .channel_tree import ChannelInfo, channel_catalog, format_value
 from .chart_data import (TIMEBASES, WINDOW_MAX_S, WINDOW_MIN_S,  # noqa: F401
                          WINDOW_PRESETS_S, ChartStats, _Series, _Trace, _window_label,
                          fetch_series, frozen_trace)
+from .chart_labels import SteadyLabel
 from .chart_plot import ChartPlot
 from .chart_settings import STATE_VERSION, ChartSettings  # noqa: F401
 from .chart_stack import PlotStack
@@ -118,7 +119,7 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         self.autoscale_all.setChecked(True)
         self.autoscale_all.setToolTip("Autoscale the y axis of every plot "
                                       "(per plot: right-click → Chart)")
-        self.info_label = QLabel(self)
+        self.info_label = SteadyLabel("", self)     # new figures twice a second: no relayout
         self.info_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         bar = QHBoxLayout()
         bar.setContentsMargins(2, 2, 2, 2)

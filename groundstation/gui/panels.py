@@ -13,11 +13,12 @@ from PySide6.QtCore import QSignalBlocker, Qt, QTimer, Signal
 from PySide6.QtGui import QColor, QFont
 from PySide6.QtWidgets import (QAbstractScrollArea, QCheckBox, QComboBox, QFormLayout, QGridLayout, QHBoxLayout,
                                QHeaderView, QLabel, QLineEdit, QListWidget, QListWidgetItem,
-                               QMessageBox, QPushButton, QSizePolicy, QSlider, QTableWidget,
+                               QMessageBox, QPushButton, QSlider, QTableWidget,
                                QTableWidgetItem, QVBoxLayout, QWidget)
 
 from ..link import format_snapshot
 from ..limits import GREEN, RED, YELLOW
+from .chart_labels import SteadyLabel
 from .session import Session
 
 LAMP = {"up": "#2e7d32", "connecting": "#f9a825", "lost": "#c62828", "failed": "#c62828",
@@ -52,10 +53,11 @@ class ConnectionBar(QWidget):
         self.connect_button = QPushButton("Connect")
         self.lamp = QLabel()
         self.lamp.setStyleSheet(lamp_style(LAMP["closed"]))
-        self.health = QLabel("not connected")
-        # the text changes every second; it must never set the window's minimum width
-        self.health.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
-        self.health.setMinimumWidth(220)
+        # The text changes twice a second: a fixed width (the usual figures fit; the
+        # tooltip has them all), so it never sets the window's minimum width and a new
+        # text does not lay the window out again.
+        self.health = SteadyLabel("not connected", width=self.fontMetrics().horizontalAdvance(
+            "12000 frames/s · dropped 000000 · CRC errors 0000 · latency 000.0 ms") + 12)
         for w in (QLabel("Source"), self.kind, self.testbed, self.address, self.serial, self.baud,
                   self.connect_button, self.lamp):
             lay.addWidget(w)
@@ -110,6 +112,7 @@ class ConnectionBar(QWidget):
         self.lamp.setToolTip(f"{state}: {message}")
         if state in ("lost", "failed", "ended"):      # ended: another station took the session
             self.health.setText(f"LINK {state.upper()}: {message}")
+            self.health.setToolTip(f"LINK {state.upper()}: {message}")
             self.health.setStyleSheet("color:#c62828; font-weight:bold;")
         elif state == "closed":
             self.health.setText("not connected")
@@ -120,7 +123,8 @@ class ConnectionBar(QWidget):
         if src is None or getattr(src, "link_state", "") not in ("up",):
             return
         snap = src.stats.snapshot()
-        self.health.setStyleSheet("")
+        if self.health.styleSheet():
+            self.health.setStyleSheet("")
         self.health.setText(_compact_health(snap))
         self.health.setToolTip(format_snapshot(snap).replace(" | ", "\n"))
 
@@ -143,6 +147,20 @@ def _compact_health(snap) -> str:
     return " · ".join(parts)
 
 
+class _LimitTable(QTableWidget):
+    """The limit table: its size follows its contents (the dock shows every channel's
+    whole name), but a new value, worst value or state colour - ten times a second -
+    only repaints it.  QAbstractItemView asks the window to lay itself out again on every
+    data change when the size follows the contents; only the names (column 0) can
+    change that size, and the other columns have fixed widths."""
+
+    def dataChanged(self, top_left, bottom_right, roles=()):
+        if top_left.column() >= 1:
+            self.viewport().update(self.visualRect(top_left).united(self.visualRect(bottom_right)))
+            return
+        super().dataChanged(top_left, bottom_right, roles)
+
+
 class StatusPanel(QWidget):
     """Mode, arm state, saturation, faults, temperatures, watchdog, parameter table CRC,
     and the limit table (latched until acknowledged)."""
@@ -154,12 +172,12 @@ class StatusPanel(QWidget):
         lay = QVBoxLayout(self)
         grid = QGridLayout()
         self.fields: dict[str, QLabel] = {}
-        self._shown: dict[str, tuple[str, str]] = {}     # what each label shows: (text, colour)
+        self._shown: dict = {}     # what each label (and limit row colour) shows: (text, colour)
         names = ["mode", "armed", "coarse_saturated", "fine_saturated", "fault", "fault_code",
                  "watchdog", "temp_motor_coarse", "temp_flexure", "param_table_crc"]
         for i, name in enumerate(names):
             grid.addWidget(QLabel(name.replace("_", " ")), i, 0)
-            lab = QLabel("-")
+            lab = SteadyLabel("-")           # temperatures change ten times a second
             lab.setFont(QFont("monospace"))
             grid.addWidget(lab, i, 1)
             self.fields[name] = lab
@@ -167,7 +185,7 @@ class StatusPanel(QWidget):
         self.crc_warning = QLabel("")
         self.crc_warning.setWordWrap(True)
         lay.addWidget(self.crc_warning)
-        self.limits = QTableWidget(0, 4)
+        self.limits = _LimitTable(0, 4)
         self.limits.setHorizontalHeaderLabels(["channel", "value", "latched", "worst"])
         # the channel's full name, always: its column is as wide as the longest name (four
         # equal stretched columns cut "HOUSEKEEPING.temp_electronics" to "HOUSE…"); the
@@ -231,7 +249,8 @@ class StatusPanel(QWidget):
                     item.setText(text)
                     if col == 0:
                         item.setToolTip(self._limit_tips.get(text, text))
-                if col == 2:
+                if col == 2 and self._shown.get(("latched", row)) != (st.channel, st.latched):
+                    self._shown[("latched", row)] = (st.channel, st.latched)
                     item.setBackground(STATE_COLOURS[st.latched])
 
     def _limit_tooltips(self) -> dict[str, str]:
@@ -396,9 +415,14 @@ class RecordingPanel(QWidget):
         self.button = QPushButton("Start recording")
         self.info = QLabel("not recording")
         self.info.setWordWrap(True)
+        # time, frames and size twice a second, in a label of their own whose size is
+        # fixed: a new text in the word-wrapped one laid the main window out every time
+        self.figures = SteadyLabel("")
+        self.figures.setFont(QFont("monospace"))
         for label, w in (("Folder", self.folder), ("Test name", self.name), ("Notes", self.notes)):
             form.addRow(label, w)
         form.addRow(self.button)
+        form.addRow(self.figures)
         form.addRow(self.info)
         self.button.clicked.connect(self.toggle)
         session.sig_recording_started.connect(self._started_recording)
@@ -425,19 +449,24 @@ class RecordingPanel(QWidget):
         self.button.setText("Start recording")
         self.info.setStyleSheet("")
         self.info.setText(f"stopped: {text}")
+        self.figures.setText("")
 
     def _failed_recording(self, text: str) -> None:
         self.button.setText("Start recording")
         self.info.setStyleSheet("color:#c62828; font-weight:bold;")
         self.info.setText(f"failed: {text}")
+        self.figures.setText("")
 
     def _update(self) -> None:
         rec = self.session.recorder
         if rec is None or rec.state != "recording":
             return
         st = rec.status()
-        self.info.setText(f"REC {time.monotonic() - self._started:6.0f} s  {st.frames} frames  "
-                          f"{st.bytes / 1e6:.1f} MB\n{st.path}")
+        self.figures.setText(f"REC {time.monotonic() - self._started:6.0f} s  {st.frames:9d} frames  "
+                             f"{st.bytes / 1e6:7.1f} MB")
+        path = f"recording to {st.path}"
+        if self.info.text() != path:          # a new file of the same recording
+            self.info.setText(path)
 
 
 class EventLog(QWidget):

@@ -22,6 +22,7 @@ from scipy import signal
 from ..dictionary import Dictionary
 from ..display_buffers import TelemetryStore
 from .channel_tree import channel_catalog, display_unit, format_value
+from .chart_labels import SteadyLabel
 
 SECONDS_CHOICES = (1, 2, 5, 10, 30, 60)
 REFRESH_HZ = 4.0
@@ -105,7 +106,7 @@ class SpectrumView(QWidget):
             self.seconds_combo.addItem(f"{s} s", float(s))
         self.seconds_combo.setCurrentIndex(SECONDS_CHOICES.index(10))
         self.seconds_combo.setToolTip("Length of data the PSD is computed over")
-        self.rms_label = QLabel(self)
+        self.rms_label = SteadyLabel("", self)     # new figures on every refresh: no relayout
         self.rms_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         self.plot = pg.PlotWidget(self)
         pi = self.plot.getPlotItem()
