@@ -160,7 +160,8 @@ class ChartCurve(pg.PlotCurveItem):
         finite = not np.isnan(y).any()
         if finite:
             ybounds = (float(inside.min()), float(inside.max())) if len(inside) else (None, None)
-            ya, yb = float(y.min()), float(y.max())
+            # live, every point is inside the window: the same extent, not a second scan
+            ya, yb = ybounds if len(inside) == len(y) else (float(y.min()), float(y.max()))
         else:
             ybounds = ((float(np.nanmin(inside)), float(np.nanmax(inside)))
                        if len(inside) and not np.isnan(inside).all() else (None, None))
@@ -168,11 +169,29 @@ class ChartCurve(pg.PlotCurveItem):
                       if not np.isnan(y).all() else (math.nan, math.nan))
         self._ybounds = ybounds if ybounds[0] is not None else None
         self._finite, self._poly_stale = finite, True
-        # Known finite: pyqtgraph skips its own finite check and builds the path in one go.
-        self.setData(x, y, connect="all" if finite else "finite", skipFiniteCheck=finite)
+        if finite:
+            self._set_finite(x, y)
+        else:
+            self.setData(x, y, connect="finite", skipFiniteCheck=False)
         self._bounds = ((float(x[0]), float(x[-1])), ybounds)
         self._extent = (float(x[0]), float(x[-1]), ya, yb) if math.isfinite(ya) else None
         self._boundingRect = None
+
+    def _set_finite(self, x: np.ndarray, y: np.ndarray) -> None:
+        """What pyqtgraph's setData does with two finite 1-D float arrays (connect 'all',
+        no finite check), without its argument handling and profiler: that Python
+        overhead was half the cost of handing a curve its points (py-spy, bench_gui)."""
+        self.xData, self.yData = x, y
+        self.opts["connect"] = "all"
+        self.opts["skipFiniteCheck"] = True
+        self.invalidateBounds()
+        self.prepareGeometryChange()
+        self.informViewBoundsChanged()
+        self.path = self.fillPath = None
+        self._fillPathList = self._mouseShape = None
+        self._lineSegmentsRendered = False
+        self.update()
+        self.sigPlotChanged.emit(self)
 
     def paint(self, p, opt, widget):
         """Finite points as one polyline from a reused QPolygonF: the same strokes as
