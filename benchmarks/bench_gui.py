@@ -21,8 +21,11 @@ over its own window (the first --warmup-seconds of the steady run are not counte
                    the recorder discarded (its queue full); frames received vs expected
                    from the device tick span, and ticks per wall second vs 1200 x speed.
 
-The burst is a second simulator process at --speed 10; the window is switched to it
-with Session.connect_address (the first simulator is stopped: a real rig is one device).
+The burst is a second simulator process at --speed 10; the window's link is ended, its
+client closed, the first simulator stopped (a real rig is one device), and only then is
+the window connected to the second one with Session.connect_address - a client still
+closing when its simulator stops reports "lost", and the session would reconnect.  A
+phase in which the session replaced its client anyway says so (client_changes).
 
 Run: QT_QPA_PLATFORM=offscreen .venv/bin/python benchmarks/bench_gui.py [--minutes 10]
      [--burst-seconds 10]
