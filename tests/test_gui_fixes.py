@@ -149,6 +149,40 @@ def test_commands_go_out_in_the_order_given_and_abort_drops_what_waits(qtbot, wi
                     and ring(window).latest("current_coarse") == 0.0, timeout=10000)
 
 
+# ---------------------------------------------------------------------------- replaced links
+def test_a_replaced_link_saying_lost_starts_no_reconnect(qtbot, window, dictionary):
+    """Switching devices closes the old client on a worker thread; if its device goes
+    away first, the old client still reports "lost".  That must not start a reconnect
+    that takes the new link over."""
+    session = window.session
+    events: list[str] = []
+    session.sig_event.connect(lambda _level, _source, text: events.append(text))
+    old_dev = SimulatedDevice(dictionary, pacing="realtime", seed=1).start()
+    new_dev = SimulatedDevice(dictionary, pacing="realtime", seed=2).start()
+    try:
+        session.connect_address(f"tcp://127.0.0.1:{old_dev.tcp_port}")
+        qtbot.waitUntil(lambda: session.client is not None and session.client.link_state == "up",
+                        timeout=30000)
+        old_client = session.client
+        session.connect_address(f"tcp://127.0.0.1:{new_dev.tcp_port}")
+        qtbot.waitUntil(lambda: session.client is not None and session.client is not old_client
+                        and session.client.link_state == "up", timeout=30000)
+        new_client = session.client
+        old_client._lost("the old device went away")       # the client's own loss path
+        frames = ring(window).total_frames
+        qtbot.waitUntil(lambda: ring(window).total_frames > frames + 600, timeout=10000)
+        assert session.client is new_client and new_client.link_state == "up"
+        assert not session._reconnect.isActive()
+        assert not any("reconnecting" in e or "link lost" in e for e in events), events
+        # the session's own link going away still reconnects
+        new_client._lost("cable pulled")
+        qtbot.waitUntil(lambda: any("reconnecting" in e for e in events), timeout=5000)
+        session.disconnect_link()
+    finally:
+        old_dev.stop()
+        new_dev.stop()
+
+
 # ---------------------------------------------------------------------------- demo
 def test_demo_moves_the_simulated_axis_and_esc_stops_it(qtbot, window):
     demo = window.demo

@@ -109,6 +109,9 @@ class Session(ConsoleMixin, QObject):
         self._want_connected = False
         self._closing = False
         self._workers: list[threading.Thread] = []
+        #: which link is the session's: raised whenever one is closed or replaced, so the
+        #: states a replaced link still reports are ignored
+        self._link_generation = 0
         #: operator commands waiting for the sender thread, in order: (name, work)
         self._command_queue: list[tuple[str, Any]] = []
         self._command_lock = threading.Lock()
@@ -167,7 +170,8 @@ class Session(ConsoleMixin, QObject):
         self._want_connected = True
         self._attempt = 0
         self.sig_link_state.emit("connecting", address)
-        self._worker(self._connect_worker, "gs-connect")
+        generation = self._link_generation
+        self._worker(lambda: self._connect_worker(generation), "gs-connect")
 
     def _worker(self, target, name: str) -> None:
         """Run blocking work off the GUI thread; shutdown() waits for all of it."""
@@ -176,7 +180,17 @@ class Session(ConsoleMixin, QObject):
         self._workers.append(t)
         t.start()
 
-    def _connect_worker(self) -> None:
+    def _link_state_of(self, generation: int, state: str, message: str) -> None:
+        """A link's state, from its client or its connect worker: passed on only while
+        that link is the session's.  A client being closed after the operator chose
+        another address (or a reconnect replaced it) may still say "lost"; that must not
+        start a reconnect that takes over the new link."""
+        if generation == self._link_generation:
+            self.sig_link_state.emit(state, message)
+        else:
+            log.debug("link state %r of a replaced link ignored (%s)", state, message)
+
+    def _connect_worker(self, generation: int) -> None:
         try:
             address = self.address
             if address == "sim":
@@ -192,11 +206,11 @@ class Session(ConsoleMixin, QObject):
             client.subscribe(self.store)
             client.subscribe(self.limits)
             client.subscribe(self._on_block)
-            client.add_link_listener(lambda s, m: self.sig_link_state.emit(s, m))
+            client.add_link_listener(lambda s, m: self._link_state_of(generation, s, m))
             client.add_command_listener(self._on_command_done)
             client.connect(take_over=True)
-            if self._closing or not self._want_connected:
-                client.close()                     # the operator gave up meanwhile
+            if self._closing or not self._want_connected or generation != self._link_generation:
+                client.close()                     # the operator gave up or went elsewhere meanwhile
                 return
             try:
                 station = Station.attach(client, testbed=self.testbed, history=self.param_history,
@@ -214,7 +228,7 @@ class Session(ConsoleMixin, QObject):
             self.sig_link_state.emit("up", address)
             self.sig_event.emit("INFO", "link", f"connected to {address}")
         except GroundStationError as exc:
-            self.sig_link_state.emit("failed", str(exc))
+            self._link_state_of(generation, "failed", str(exc))
 
     def disconnect_link(self) -> None:
         """Close the session (the device disarms), switch the generator's outputs off
@@ -224,6 +238,7 @@ class Session(ConsoleMixin, QObject):
         self.generator.abort()
         self._want_connected = False
         self._reconnect.stop()
+        self._link_generation += 1                  # what the old link says from now on is ignored
         self._close_station()
         client, self.client = self.client, None
         self.watching = None
@@ -285,6 +300,7 @@ class Session(ConsoleMixin, QObject):
         if not self._want_connected:
             return
         self._close_station()
+        self._link_generation += 1
         old, self.client = self.client, None
         if old is not None:
             self._worker(old.close, "gs-close-lost")
@@ -294,7 +310,8 @@ class Session(ConsoleMixin, QObject):
             self.sim.stop()
             self.sim = None                       # start a fresh simulator
         self.sig_link_state.emit("connecting", self.address)
-        self._worker(self._connect_worker, "gs-reconnect")
+        generation = self._link_generation
+        self._worker(lambda: self._connect_worker(generation), "gs-reconnect")
 
     # ------------------------------------------------------------------ telemetry callbacks
     def _on_block(self, block) -> None:
