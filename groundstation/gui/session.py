@@ -41,6 +41,7 @@ from ..station.station import Station
 from ..display_buffers import TelemetryStore
 from .campaign_runner import CampaignController
 from .fg_controller import GeneratorController
+from .session_commands import CommandQueue
 from .session_events import PlayOutcome
 
 log = logging.getLogger(__name__)
@@ -112,10 +113,8 @@ class Session(ConsoleMixin, QObject):
         #: which link is the session's: raised whenever one is closed or replaced, so the
         #: states a replaced link still reports are ignored
         self._link_generation = 0
-        #: operator commands waiting for the sender thread, in order: (name, work)
-        self._command_queue: list[tuple[str, Any]] = []
-        self._command_lock = threading.Lock()
-        self._command_sender = False
+        #: operator commands, sent one after another in the order given
+        self._commands = CommandQueue(self._worker)
         self._attempt = 0
         self._reconnect = QTimer(self)
         self._reconnect.setSingleShot(True)
@@ -358,28 +357,11 @@ class Session(ConsoleMixin, QObject):
             except GroundStationError as exc:
                 self.sig_event.emit("ERROR", "command", str(exc))
         if name == "ABORT":
-            with self._command_lock:
-                dropped, self._command_queue = self._command_queue, []
-            for queued_name, _ in dropped:
-                self.sig_command.emit(queued_name, "", "CANCELLED", "ABORT sent before it")
+            for dropped in self._commands.drop_waiting():
+                self.sig_command.emit(dropped, "", "CANCELLED", "ABORT sent before it")
             self._worker(work, "gs-cmd-ABORT")
-            return
-        with self._command_lock:
-            self._command_queue.append((name, work))
-            if self._command_sender:
-                return                  # the running sender takes it in turn
-            self._command_sender = True
-        self._worker(self._send_commands, "gs-commands")
-
-    def _send_commands(self) -> None:
-        """The one sender of queued commands: runs until the queue is empty."""
-        while True:
-            with self._command_lock:
-                if not self._command_queue:
-                    self._command_sender = False
-                    return
-                _, work = self._command_queue.pop(0)
-            work()
+        else:
+            self._commands.submit(name, work)
 
     def abort(self) -> None:
         """ABORT now, whatever the state: the generator's outputs off (fail safe, even

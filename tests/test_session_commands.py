@@ -1,0 +1,66 @@
+"""The Session's command order (groundstation/gui/session_commands.py): one sender in
+the order given; ABORT's drop_waiting() forgets what has not gone out."""
+
+from __future__ import annotations
+
+import threading
+
+from groundstation.gui.session_commands import CommandQueue
+
+
+def start_thread(threads):
+    def start(target, name):
+        t = threading.Thread(target=target, name=name, daemon=True)
+        threads.append(t)
+        t.start()
+    return start
+
+
+def test_commands_are_sent_in_the_order_given_by_one_sender():
+    threads: list[threading.Thread] = []
+    queue = CommandQueue(start_thread(threads))
+    sent: list[str] = []
+    first_started, release_first = threading.Event(), threading.Event()
+
+    def first():
+        first_started.set()
+        assert release_first.wait(10.0)
+        sent.append("SET_MODE")
+
+    queue.submit("SET_MODE", first)
+    assert first_started.wait(10.0)
+    # while SET_MODE is out, the others wait in line behind it
+    for name in ("ARM", "SET_CURRENTS", "SET_REFERENCE"):
+        queue.submit(name, lambda name=name: sent.append(name))
+    assert len(threads) == 1                      # no second sender was started
+    release_first.set()
+    threads[0].join(10.0)
+    assert not threads[0].is_alive()
+    assert sent == ["SET_MODE", "ARM", "SET_CURRENTS", "SET_REFERENCE"]
+    # the queue empty, the next command starts a sender again
+    queue.submit("DISARM", lambda: sent.append("DISARM"))
+    assert len(threads) == 2
+    threads[1].join(10.0)
+    assert sent[-1] == "DISARM"
+
+
+def test_drop_waiting_forgets_what_has_not_gone_out():
+    threads: list[threading.Thread] = []
+    queue = CommandQueue(start_thread(threads))
+    sent: list[str] = []
+    started, release = threading.Event(), threading.Event()
+
+    def blocking():
+        started.set()
+        assert release.wait(10.0)
+        sent.append("SET_CURRENTS")
+
+    queue.submit("SET_CURRENTS", blocking)
+    assert started.wait(10.0)
+    queue.submit("SET_MODE", lambda: sent.append("SET_MODE"))
+    queue.submit("ARM", lambda: sent.append("ARM"))
+    assert queue.drop_waiting() == ["SET_MODE", "ARM"]
+    assert queue.drop_waiting() == []
+    release.set()                                 # the one being sent goes to its end
+    threads[0].join(10.0)
+    assert sent == ["SET_CURRENTS"]
