@@ -19,7 +19,8 @@ from .demo import DEMO_TITLE, DemoController, plan_for
 from .fg_panel import GeneratorPanel
 from .params_panel import ParameterPanel
 from .profile_panel import ProfilePanel
-from .panels import CommandPanel, ConnectionBar, EventLog, RecordingPanel, ReplayBar, StatusPanel
+from .log_panels import EventLog, ReplayBar
+from .panels import CommandPanel, ConnectionBar, RecordingPanel, StatusPanel
 from .session import Session
 from .spectrum import SpectrumView
 

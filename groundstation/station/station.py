@@ -48,6 +48,7 @@ from ..link.client import DeviceClient
 from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
+from .generator_verbs import GeneratorVerbs
 from .recording import RecordingSlot
 from .settling import settle_rig
 from .start_state import StartCriteria
@@ -64,7 +65,7 @@ class ScriptError(GroundStationError):
     """A step of a script or campaign could not be done (the message says which and why)."""
 
 
-class Station:
+class Station(GeneratorVerbs):
     """One session with a testbed (or its simulation); see the module docstring."""
 
     __test__ = False        # `Testbed` is this class: a name pytest must not collect
@@ -513,42 +514,12 @@ class Station:
         self.recording.mark("script", text)
 
     # ------------------------------------------------------------------ generator
+    # (its verbs: generator_verbs.GeneratorVerbs)
     def _need_generator(self, what: str):
         if self.generator is None:
             raise ScriptError(f"{what}: no function generator in this session "
                               f"(give generator='sim' or a VISA resource)")
         return self.generator
-
-    def generator_set(self, channel: int = 1, *, waveform: str = "SINE", frequency_hz: float | None = None,
-                      amplitude_vpp: float | None = None, offset_v: float = 0.0,
-                      phase_deg: float = 0.0, output: bool = True) -> None:
-        gen = self._need_generator("generator_set")
-        gen.configure(channel, waveform=waveform, frequency_hz=frequency_hz,
-                      amplitude_vpp=amplitude_vpp, offset_v=offset_v, phase_deg=phase_deg)
-        gen.set_output(channel, output)
-        self.echo(f"generator: {gen.describe(channel)}")
-
-    def generator_off(self) -> None:
-        if self.generator is not None:
-            self.generator.abort()
-
-    def play_base_motion(self, psd_file: str | Path, *, duration_s: float = 60.0, seed: int = 0,
-                         rms_rad: float | None = None, channel: int = 1):
-        """Synthesise a base-motion profile from a PSD table, upload it to the generator
-        and switch the output on; returns the profile (for the achieved-vs-target check)."""
-        from ..basemotion import load_profile
-
-        gen = self._need_generator("play_base_motion")
-        profile = load_profile(psd_file, self.testbed, duration_s=duration_s, seed=seed,
-                               target_rms_rad=rms_rad)
-        gen.upload_arbitrary(channel, profile.volts, name=Path(psd_file).stem[:8].upper(),
-                             frequency_hz=1.0 / profile.duration_s)
-        gen.set_output(channel, True)
-        self.echo(f"base motion {profile.name}: {profile.amplitude_vpp:.3f} Vpp, "
-                  f"{profile.duration_s:g} s period")
-        self.recording.mark("generator", f"base motion {profile.name} on",
-                            amplitude_vpp=profile.amplitude_vpp)
-        return profile
 
     # ------------------------------------------------------------------ helpers
     def _journal(self, kind: str, record: dict, blob: bytes = b"") -> None:
@@ -563,14 +534,6 @@ class Station:
         if self.state.fault:
             raise ScriptError("the device reports a fault (see its EVENTs); it has disarmed - "
                               "send DISARM to acknowledge it, then try again")
-
-    def _close_generator(self) -> None:
-        gen, self.generator = self.generator, None
-        if gen is not None and self._owns_generator:
-            gen.close()
-        server, self._fg_server = self._fg_server, None
-        if server is not None:
-            server.stop()
 
     def _close_clock(self) -> None:
         if self.clock is not None:
