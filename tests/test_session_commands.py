@@ -16,24 +16,32 @@ def start_thread(threads):
     return start
 
 
+class HeldSend:
+    """A command's send that stays out until released (as one waiting for the device's
+    answer would), then records its name."""
+
+    def __init__(self, name: str, sent: list[str]):
+        self.name, self.sent = name, sent
+        self.started, self.release = threading.Event(), threading.Event()
+
+    def __call__(self) -> None:
+        self.started.set()
+        assert self.release.wait(10.0)
+        self.sent.append(self.name)
+
+
 def test_commands_are_sent_in_the_order_given_by_one_sender():
     threads: list[threading.Thread] = []
     queue = CommandQueue(start_thread(threads))
     sent: list[str] = []
-    first_started, release_first = threading.Event(), threading.Event()
-
-    def first():
-        first_started.set()
-        assert release_first.wait(10.0)
-        sent.append("SET_MODE")
-
+    first = HeldSend("SET_MODE", sent)
     queue.submit("SET_MODE", first)
-    assert first_started.wait(10.0)
+    assert first.started.wait(10.0)
     # while SET_MODE is out, the others wait in line behind it
     for name in ("ARM", "SET_CURRENTS", "SET_REFERENCE"):
         queue.submit(name, lambda name=name: sent.append(name))
     assert len(threads) == 1                      # no second sender was started
-    release_first.set()
+    first.release.set()
     threads[0].join(10.0)
     assert not threads[0].is_alive()
     assert sent == ["SET_MODE", "ARM", "SET_CURRENTS", "SET_REFERENCE"]
@@ -48,19 +56,13 @@ def test_drop_waiting_forgets_what_has_not_gone_out():
     threads: list[threading.Thread] = []
     queue = CommandQueue(start_thread(threads))
     sent: list[str] = []
-    started, release = threading.Event(), threading.Event()
-
-    def blocking():
-        started.set()
-        assert release.wait(10.0)
-        sent.append("SET_CURRENTS")
-
-    queue.submit("SET_CURRENTS", blocking)
-    assert started.wait(10.0)
+    current = HeldSend("SET_CURRENTS", sent)
+    queue.submit("SET_CURRENTS", current)
+    assert current.started.wait(10.0)
     queue.submit("SET_MODE", lambda: sent.append("SET_MODE"))
     queue.submit("ARM", lambda: sent.append("ARM"))
     assert queue.drop_waiting() == ["SET_MODE", "ARM"]
     assert queue.drop_waiting() == []
-    release.set()                                 # the one being sent goes to its end
+    current.release.set()                         # the one being sent goes to its end
     threads[0].join(10.0)
     assert sent == ["SET_CURRENTS"]
