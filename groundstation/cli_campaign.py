@@ -60,6 +60,9 @@ def add_parsers(sub) -> argparse._SubParsersAction:
     s.add_argument("--device", default="sim", help="sim | tcp://HOST:PORT | serial://PORT?baud=N")
     s.add_argument("--fast", action="store_true",
                    help="with --device sim: run the simulator as fast as it goes (device time)")
+    s.add_argument("--fast-sim", choices=("process", "inline"), default="process",
+                   help="with --fast: the simulator in a child process of its own (default; "
+                        "a core to itself) or in this process")
     s.add_argument("--generator", default="auto",
                    help="VISA resource of the base-motion generator (auto: the simulator's, "
                         "for an inertial testbed; none: no generator)")
@@ -196,7 +199,7 @@ def _cmd_run(args) -> int:
     try:
         with Testbed(args.device, testbed=c.testbed, fast=args.fast, generator=generator,
                      log_folder=folder, seed=args.seed, take_over=args.take_over, operator=operator,
-                     publish=args.publish, curve_keys=args.curve_keys,
+                     publish=args.publish, curve_keys=args.curve_keys, fast_sim=args.fast_sim,
                      echo=lambda text: print(f"    {text}", flush=True)) as tb:
             runner = CampaignRunner(c, tb, max_step_seconds=args.max_step_seconds,
                                     progress=_Progress(len(c.steps)))

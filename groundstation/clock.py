@@ -2,7 +2,8 @@
 fast mode, as fast as the simulator, the link and the recorder can go.
 
 `WallClock.advance(seconds)` sleeps (in short steps, so an abort or a lost link ends the
-wait at once).  `SteppedClock` drives a manually paced SimulatedDevice (in this process):
+wait at once).  `SteppedClock` drives a manually paced SimulatedDevice (in this process, or in a child
+process through sim/stepped_process.SteppedSimulatorProcess):
 
 - advance() runs the device in chunks of 0.75 s as fast as it can, with flow control by
   credits: at most `FastPacing.in_flight` chunks whose frames the host has not yet all
@@ -25,7 +26,7 @@ wait at once).  `SteppedClock` drives a manually paced SimulatedDevice (in this 
   held, the device runs chunks flat out while a profile plays; realtime, as long as
   the block lasts.
 - `until` (a host-side predicate on telemetry) is evaluated on whole chunks, each fully
-  received first; `device_until` (a predicate on the in-process device) after each
+  received first; `device_until` (a predicate on the device, e.g. its `faulted`) after each
   chunk without waiting - both end an advance at the same tick however fast it runs.
 """
 
@@ -149,7 +150,7 @@ class SteppedClock:
         #: benchmark's profile
         self.waited_s = 0.0
         if between_steps == "held":
-            device.after_commands = self._confirm
+            device.hold_between_steps(self._ran, datagram_bytes=self.pacing.datagram_bytes)
         self._idle = threading.Thread(target=self._idle_loop, name="gs-sim-idle-clock", daemon=True)
         self._idle.start()
 
@@ -201,13 +202,9 @@ class SteppedClock:
                 self._in_flight.append(last)
         return last
 
-    def _confirm(self, housekeeping: bool) -> None:
-        """Held between steps: a command was executed (device lock held) - run the control
-        period it takes effect in, so its state reaches the host in HIGH_RATE; for a
-        command confirmed in HOUSEKEEPING, to the end of the housekeeping period."""
-        every = self.device.housekeeping_divider
-        n = every - self.device.firmware.tick % every if housekeeping else 1
-        last = self.device.step(n, datagram_bytes=self.pacing.datagram_bytes)
+    def _ran(self, last: int) -> None:
+        """Held between steps: the device ran a command's confirmation period(s) itself
+        (SimulatedDevice.hold_between_steps), ending at tick `last`."""
         with self._seen:
             self._in_flight.append(last)
         self._commanded.set()
@@ -239,6 +236,7 @@ class SteppedClock:
 
     def drain(self) -> None:
         """Until the host has received every frame the device sent."""
+        self.device.sync()          # a device in another process: its periods all counted
         self._wait_for_credit(0)
 
     def tick_over(self) -> None:
@@ -300,6 +298,9 @@ class SteppedClock:
         self._fast.clear()
         self._commanded.set()
         self._idle.join(timeout=15)
-        if getattr(self.device, "after_commands", None) == self._confirm:
-            self.device.after_commands = None
+        if self.between_steps == "held":
+            try:
+                self.device.hold_between_steps(None)
+            except LinkLostError:            # a device process already gone holds nothing
+                pass
         self.client.unsubscribe(self._on_block)

@@ -33,11 +33,11 @@ PROFILE = ROOT / "profiles" / "waveforms" / "sysid_coarse_noise_0p02A.toml"
 PIPELINED = FastPacing(in_flight=6, datagram_bytes=32768)
 
 
-def _session(folder: Path, pacing: FastPacing) -> tuple[Path, dict]:
+def _session(folder: Path, pacing: FastPacing, fast_sim: str = "inline") -> tuple[Path, dict]:
     """Closed loop, a step, a profile played, a mark, then open loop driven into a
     fault that ends a dwell early - all recorded."""
     with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=True,
-                 log_folder=folder, pacing=pacing) as tb:
+                 log_folder=folder, pacing=pacing, fast_sim=fast_sim) as tb:
         tb.upload_design(DESIGN)
         tb.start_recording("speed")
         tb.set_mode("RELATIVE")
@@ -143,6 +143,22 @@ def test_fast_runs_are_tick_repeatable(two_runs):
             assert 0 <= old["faulted_at"] - first_fault < 900
     assert ticks[0] == ticks[1]
     assert any(name == "PROFILE_START" for name, _ in ticks[0])
+    assert old["faulted_at"] == new["faulted_at"]
+
+
+@pytest.fixture(scope="module")
+def process_run(tmp_path_factory):
+    return _session(tmp_path_factory.mktemp("process"), PIPELINED, fast_sim="process")
+
+
+def test_a_simulator_in_its_own_process_writes_the_same_log(two_runs, process_run):
+    """The fast device in a child process (sim/stepped_process.py): the same frames,
+    the same journal, commands at the same ticks, the fault's dwell ended at the same
+    tick as the in-process device with the pacing of before."""
+    (old_path, old), _ = two_runs
+    new_path, new = process_run
+    assert new["dropped"] == 0 and new["discarded_blocks"] == 0
+    _assert_same(_content(old_path), _content(new_path))
     assert old["faulted_at"] == new["faulted_at"]
 
 

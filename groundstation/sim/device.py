@@ -414,6 +414,32 @@ class SimulatedDevice:
             self.host_heard()
             return self.firmware.tick & 0xFFFFFFFF
 
+    def hold_between_steps(self, on_ran: Callable[[int], None] | None, *,
+                           datagram_bytes: int = 0) -> None:
+        """Manual pacing with device time held between the clock's steps: after a block
+        of commands one of which needs device time to be confirmed, run the control
+        period it takes effect in (for one confirmed in HOUSEKEEPING, to the end of the
+        housekeeping period), so its state reaches the host, then `on_ran(last_tick)` -
+        all before the commands' answers leave.  None: commands run no periods."""
+        if on_ran is None:
+            self.after_commands = None
+            return
+
+        def confirm(housekeeping: bool) -> None:
+            every = self.housekeeping_divider
+            n = every - self.firmware.tick % every if housekeeping else 1
+            on_ran(self.step(n, datagram_bytes=datagram_bytes))
+        self.after_commands = confirm
+
+    def sync(self) -> None:
+        """Every confirmation period run so far has been reported (in this process,
+        on_ran is called before step returns: nothing to wait for)."""
+
+    @property
+    def faulted(self) -> bool:
+        """Whether the firmware has latched a fault."""
+        return bool(self.firmware.fault)
+
     def host_heard(self) -> None:
         """Manual pacing: the session's host was heard now (what any session command does
         on the firmware); nothing without a session."""

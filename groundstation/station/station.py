@@ -26,9 +26,12 @@ Safety lives here, not in the callers:
   the rig safe: ABORT (motors off, disarmed), the generator's outputs off, the recording
   closed with everything received so far and the reason it closed.
 
-`device="sim"` starts the simulated testbed: with `fast=True` in this process, its
-clock driven by the session (a 60 s dwell takes about a second); without, as a
-real-time child process, exactly as `make run` does.  Any other value is a rig's address.
+`device="sim"` starts the simulated testbed: with `fast=True` its clock is driven by the
+session (a 60 s dwell takes about a second), the device in this process
+(`fast_sim="inline"`, where a script can reach it) or in a child process of its own
+(`fast_sim="process"`, faster: it does not share this interpreter with the receiver);
+without, as a real-time child process, exactly as `make run` does.  Any other value is
+a rig's address.
 """
 
 from __future__ import annotations
@@ -56,6 +59,9 @@ from .tracker import DeviceStateTracker
 
 log = logging.getLogger(__name__)
 
+#: where a fast simulated device runs: in this process, or in a child process of its own
+FAST_SIMS = ("inline", "process")
+
 #: the commands that change the parameter table: only ParameterLoader sends them, and
 #: only for a cleared table (Station.command refuses them)
 TABLE_COMMANDS = frozenset({"PARAM_BEGIN", "PARAM_WRITE", "PARAM_COMMIT"})
@@ -78,8 +84,13 @@ class Station(GeneratorVerbs):
                  operator: Callable[[str], bool] | None = None,
                  echo: Callable[[str], None] | None = None,
                  publish: str | None = None, curve_keys: str | None = None,
-                 pacing: FastPacing | None = None, between_steps: str = "held"):
+                 pacing: FastPacing | None = None, between_steps: str = "held",
+                 fast_sim: str = "inline"):
+        if fast_sim not in FAST_SIMS:
+            raise ValueError(f"fast_sim must be one of {', '.join(FAST_SIMS)}, not {fast_sim!r}")
         self.device_spec = device
+        #: fast only: where the simulated device runs (FAST_SIMS)
+        self.fast_sim = fast_sim
         #: fast only: how the stepped clock paces the device (clock.py)
         self.pacing, self.between_steps = pacing, between_steps
         #: publish the link for read-only consoles on this endpoint (fanout/, docs/consoles.md)
@@ -108,7 +119,7 @@ class Station(GeneratorVerbs):
         self.generator: BaseMotionInstrument | None = None
         self.recording = RecordingSlot(self.echo)
         self.last_upload = None
-        self._device = None          # in-process SimulatedDevice (fast)
+        self._device = None          # SimulatedDevice or SteppedSimulatorProcess (fast)
         self._fg_server = None
         self._sim = None             # SimulatorProcess (real-time simulation)
         #: attach(): the client belongs to someone else (the GUI's session) - close() leaves
@@ -207,7 +218,13 @@ class Station(GeneratorVerbs):
         resource = None
         want_fg = (self.generator_spec == "auto" and self.testbed.inertial) or self.generator_spec == "sim"
         if self.device_spec == "sim":
-            if self.fast:
+            if self.fast and self.fast_sim == "process":
+                from ..sim.stepped_process import SteppedSimulatorProcess
+                self._device = SteppedSimulatorProcess(
+                    self.d, testbed=self.testbed.path, seed=self.seed, generator=want_fg).start()
+                address = f"127.0.0.1:{self._device.tcp_port}"
+                resource = self._device.fg_resource
+            elif self.fast:
                 from ..sim.device import SimulatedDevice
                 from ..sim.firmware import Firmware
 
@@ -451,8 +468,8 @@ class Station(GeneratorVerbs):
         # a fault ends the wait at once: the log then ends near the fault, not a minute on
         if isinstance(self.clock, SteppedClock):
             # judged on the device after each chunk: the same tick however fast it runs
-            firmware = self._device.firmware
-            self.clock.advance(seconds, progress, device_until=lambda: bool(firmware.fault))
+            device = self._device
+            self.clock.advance(seconds, progress, device_until=lambda: device.faulted)
         else:
             self.clock.advance(seconds, progress, until=lambda: self.state.fault)
         self._check_running()
