@@ -18,9 +18,9 @@ import math
 import numpy as np
 import pyqtgraph as pg
 from pyqtgraph import functions as fn
-from PySide6.QtCore import QRectF, Qt, Signal
+from PySide6.QtCore import QObject, QRectF, Qt, Signal
 from PySide6.QtGui import QPainter
-from PySide6.QtWidgets import QGraphicsItem, QMenu, QWidget
+from PySide6.QtWidgets import QGraphicsItem, QMenu
 
 from .channel_tree import DisplayUnit, channel_ids_from_text
 from .chart_autoscale import ChartViewBox
@@ -235,30 +235,31 @@ class ChartCurve(pg.PlotCurveItem):
         return self._bounds[ax]
 
 
-class ChartPlot(pg.PlotWidget):
+class ChartPlot(QObject):
     """One plot of the stack: its curves, gap markers, cursor line and info text.
 
-    Holds no data; the panel hands it arrays.  A drop of channel ids (text lines)
-    emits sig_dropped."""
+    A PlotItem (`getPlotItem()`) in the panel's one graphics view (chart_column.py), not
+    a view of its own.  Holds no data; the panel hands it arrays.  A drop of channel ids
+    (text lines) emits sig_dropped."""
 
     #: curve colours, distinct on the dark background; red is kept for gap markers
     PALETTE = ("#4e9bff", "#ffa62b", "#2ec4b6", "#c792ea", "#f7e03c", "#8ac926",
                "#ff70a6", "#00d0ff", "#c0c0c0", "#ff8c61")
     MAX_GAP_MARKERS = 100
+    MIN_HEIGHT = 90
 
     sig_dropped = Signal(list)
     sig_menu_about_to_show = Signal(object)
     sig_mouse_x = Signal(object)                 # float, or None when the mouse leaves
     sig_x_range_changed = Signal()
 
-    def __init__(self, parent: QWidget | None = None):
+    def __init__(self, parent: QObject | None = None):
+        super().__init__(parent)
         self.time_axis = _TimeAxis()
-        super().__init__(parent, viewBox=ChartViewBox(),
-                         axisItems={"bottom": self.time_axis, "left": _ValueAxis()})
+        self._pi = pi = pg.PlotItem(viewBox=ChartViewBox(),
+                                    axisItems={"bottom": self.time_axis, "left": _ValueAxis()})
         self.origin = 0.0          # absolute time of view x = 0 (see the module docstring)
-        self.setAcceptDrops(True)
-        self.setMinimumHeight(90)
-        pi = self.getPlotItem()
+        pi.setMinimumHeight(self.MIN_HEIGHT)
         # No grid by default: on the raster engine a translucent grid doubles the paint
         # time of a scrolling plot (measured); Plot Options → Grid in the menu adds one.
         pi.hideButtons()
@@ -292,13 +293,16 @@ class ChartPlot(pg.PlotWidget):
         self.cursor.hide()
         self._gap_pen = pg.mkPen((255, 50, 50, 200), width=1, style=Qt.PenStyle.DashLine)
         self.gap_lines: list[pg.InfiniteLine] = []
-        self.chart_menu = QMenu("Chart", self)
+        # no parent widget (a plot item is none); the attribute keeps the menu alive
+        self.chart_menu = QMenu("Chart")
         self.channel_menus: dict[str, QMenu] = {}      # filled by the panel with the menu
         vb.menu.addSeparator()
         vb.menu.addMenu(self.chart_menu)
         vb.menu.aboutToShow.connect(lambda: self.sig_menu_about_to_show.emit(self))
-        self.scene().sigMouseMoved.connect(self._on_mouse_moved)
         vb.sigXRangeChanged.connect(lambda *_: self.sig_x_range_changed.emit())
+
+    def getPlotItem(self) -> pg.PlotItem:          # noqa: N802 - PlotWidget's name
+        return self._pi
 
     # ------------------------------------------------------------ curves, axes
     def add_curve(self, cid: str, name: str, unit: DisplayUnit, colour: int,
@@ -432,25 +436,14 @@ class ChartPlot(pg.PlotWidget):
             self.cursor.setValue(x)
             self.cursor.show()
 
-    def _on_mouse_moved(self, pos) -> None:
+    def mouse_moved(self, pos) -> None:
+        """The scene's mouse position (the column hands it to every plot): over this
+        plot's data area, the time there."""
         vb = self.getPlotItem().getViewBox()
         if vb.sceneBoundingRect().contains(pos):
             self.sig_mouse_x.emit(float(vb.mapSceneToView(pos).x()) + self.origin)
 
-    def leaveEvent(self, event) -> None:
-        self.sig_mouse_x.emit(None)
-        super().leaveEvent(event)
-
-    def dragEnterEvent(self, event) -> None:
-        if event.mimeData().hasText():
-            event.acceptProposedAction()
-        else:
-            event.ignore()
-
-    def dragMoveEvent(self, event) -> None:
-        self.dragEnterEvent(event)
-
-    def dropEvent(self, event) -> None:
+    def dropEvent(self, event) -> None:                # noqa: N802 - the view's drop, passed on
         ids = channel_ids_from_text(event.mimeData().text())
         if ids:
             event.acceptProposedAction()

@@ -3,7 +3,7 @@ y ranges (what the toolbar and the plots' menus set, kept in step with the toolb
 their persistence (`state` / `restore_state`, for QSettings).
 
 A part of `StripChartPanel` (charts.py), which provides `store`, `plots`, the toolbar's
-widgets, `splitter`, the redraw flags, `sig_paused_changed` and (from its plot stack)
+widgets, `column` (the plots' view and their heights), the redraw flags, `sig_paused_changed` and (from its plot stack)
 `set_layout`, `layout_ids` and `is_valid_channel`.
 """
 
@@ -15,9 +15,10 @@ from typing import TYPE_CHECKING
 from .chart_data import TIMEBASES, WINDOW_MAX_S, WINDOW_MIN_S, _window_label, newest_times
 
 if TYPE_CHECKING:
-    from PySide6.QtWidgets import QComboBox, QPushButton, QSplitter
+    from PySide6.QtWidgets import QComboBox, QPushButton
 
     from ..display_buffers import TelemetryStore
+    from .chart_column import PlotColumn
     from .chart_plot import ChartPlot
 
 # the panel's logger, as these messages always were
@@ -35,7 +36,7 @@ class ChartSettings:
     window_combo: QComboBox
     timebase_combo: QComboBox
     pause_button: QPushButton
-    splitter: QSplitter
+    column: PlotColumn
     _window_s: float
     _timebase: str
     _paused: bool
@@ -118,7 +119,7 @@ class ChartSettings:
             "window_s": self._window_s,
             "timebase": self._timebase,
             "y": [{"auto": p.autoscale, "range": list(p.y_range())} for p in self.plots],
-            "heights": self.splitter.sizes(),
+            "heights": self.column.sizes(),
         }
 
     def restore_state(self, state: dict) -> None:
@@ -152,4 +153,4 @@ class ChartSettings:
                 plot.set_autoscale(True)
         heights = state.get("heights")
         if isinstance(heights, list) and len(heights) == len(self.plots):
-            self.splitter.setSizes([int(h) for h in heights])
+            self.column.setSizes([int(h) for h in heights])

@@ -3,7 +3,7 @@ removed, dropped from the channel tree), their colours, the shared time axis, an
 plot's right-click "Chart" menu.
 
 A part of `StripChartPanel` (charts.py), which provides `store`, `catalog`, `plots`,
-`splitter`, `autoscale_all`, `_timebase`, `_paused`, `_colours`, the redraw flags,
+`column` (the one view the plots share, chart_column.py), `autoscale_all`, `_timebase`, `_paused`, `_colours`, the redraw flags,
 `sig_layout_changed` and the slots a new plot is wired to (`set_cursor`,
 `_on_x_range_changed`).
 """
@@ -19,9 +19,10 @@ from .chart_plot import ChartPlot
 from .channel_tree import ChannelInfo, DisplayUnit, display_unit
 
 if TYPE_CHECKING:
-    from PySide6.QtWidgets import QCheckBox, QSplitter
+    from PySide6.QtWidgets import QCheckBox
 
     from ..display_buffers import TelemetryStore
+    from .chart_column import PlotColumn
 
 # the panel's logger, as these messages always were
 log = logging.getLogger("groundstation.gui.charts")
@@ -34,7 +35,7 @@ class PlotStack:
     store: TelemetryStore
     catalog: dict[str, ChannelInfo]
     plots: list[ChartPlot]
-    splitter: QSplitter
+    column: PlotColumn
     autoscale_all: QCheckBox
     _timebase: str
     _paused: bool
@@ -62,8 +63,7 @@ class PlotStack:
             for cid in ids:
                 self._check(cid)
         for plot in self.plots:
-            plot.setParent(None)
-            plot.deleteLater()
+            self.column.remove(plot)
         self.plots = []
         self._colours.clear()
         for ids in layout or [[]]:
@@ -89,8 +89,7 @@ class PlotStack:
         for cid in plot.curves:
             if not self._shown_elsewhere(cid, None):
                 self._colours.pop(cid, None)
-        plot.setParent(None)
-        plot.deleteLater()
+        self.column.remove(plot)
         if not self.plots:
             self._new_plot(0)
         self._relayout()
@@ -181,7 +180,7 @@ class PlotStack:
         plot.sig_x_range_changed.connect(self._on_x_range_changed)
         plot.set_autoscale(self.autoscale_all.isChecked())
         self.plots.insert(index, plot)
-        self.splitter.insertWidget(index, plot)
+        self.column.insert(index, plot)
         return plot
 
     def _relayout(self) -> None:

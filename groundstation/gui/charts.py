@@ -43,7 +43,7 @@ from collections import deque
 import numpy as np
 from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtWidgets import (QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushButton,
-                               QSplitter, QVBoxLayout, QWidget)
+                               QVBoxLayout, QWidget)
 
 from ..dictionary import Dictionary
 from ..display_buffers import TelemetryStore, insert_breaks
@@ -51,6 +51,7 @@ from .channel_tree import ChannelInfo, channel_catalog, format_value
 from .chart_data import (TIMEBASES, WINDOW_MAX_S, WINDOW_MIN_S,  # noqa: F401
                          WINDOW_PRESETS_S, ChartStats, _Series, _Trace, _window_label,
                          fetch_series, frozen_trace)
+from .chart_column import PlotColumn
 from .chart_labels import SteadyLabel
 from .chart_plot import ChartPlot
 from .chart_settings import STATE_VERSION, ChartSettings  # noqa: F401
@@ -131,8 +132,9 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         bar.addWidget(self.add_plot_button)
         bar.addStretch(1)
         bar.addWidget(self.info_label)
-        self.splitter = QSplitter(Qt.Orientation.Vertical, self)
-        self.splitter.setChildrenCollapsible(False)
+        # all plots in one view: one paint event and one scene traversal a frame
+        self.column = PlotColumn(self)
+        self.column.sig_left.connect(lambda: self.set_cursor(None))
         self.readout = QLabel(self)
         self.readout.setWordWrap(True)
         self.readout.setTextFormat(Qt.TextFormat.RichText)
@@ -143,7 +145,7 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         layout.setContentsMargins(0, 0, 0, 0)
         layout.setSpacing(2)
         layout.addLayout(bar)
-        layout.addWidget(self.splitter, 1)
+        layout.addWidget(self.column, 1)
         layout.addWidget(self.readout)
         self.window_combo.setCurrentIndex(WINDOW_PRESETS_S.index(10))
         self.window_combo.currentIndexChanged.connect(
