@@ -2,10 +2,14 @@
 
 Side by side, in one run, repeated (--rounds, interleaved; medians):
 
-  ours       Testbed(fast=True): relative Design #2 uploaded, a 60 s band-limited current
-             profile played open loop and a 60 s dwell, both recorded - device seconds
-             per wall second; pipelined (clock.FastPacing(): several 0.75 s chunks in
-             flight, many frames per datagram, device held between steps)
+  ours       Testbed(fast=True, fast_sim="process"), what `campaign run --fast` does:
+             relative Design #2 uploaded, a 60 s band-limited current profile played
+             open loop and a 60 s dwell, both recorded - device seconds per wall second;
+             the simulator in a child process of its own, pipelined (clock.FastPacing():
+             several 0.75 s chunks in flight, many frames per datagram, device held
+             between steps)
+  inline     the same with the simulator in this process (fast_sim="inline"), sharing
+             the interpreter with the telemetry receiver
   one chunk  the same with the pacing before issue 19: one chunk in flight, one frame per
              datagram, the device running in real time between steps
   baseline   the real-time simulator (what a rig, or `--device sim` without --fast, takes:
@@ -14,7 +18,8 @@ Side by side, in one run, repeated (--rounds, interleaved; medians):
              or recorded (the same engine and firmware: bench_sim.py's figure)
 
 Where the wall time goes (--profile): per phase, the simulator's own time (engine,
-firmware, frame encoding; wall and the thread's CPU time), sending, the clock's waits
+firmware, frame encoding; wall and the thread's CPU time - for the child process, its
+CPU time, sending included), sending, the clock's waits
 for credits, and the CPU time of the other threads of this process (the receiver, the
 queue's feeder to the log writer) and of the log writer process (Linux: from /proc).  Each round's ratios to the simulator alone (measured at the start of the
 round) are printed, and their medians.
@@ -78,11 +83,14 @@ class _Timers:
 
     def __init__(self, device, tb) -> None:
         self.tb = tb
+        #: the simulator's child process (fast_sim="process"), else None
+        self.child = getattr(device, "proc", None)
         self.cpu0 = self._cpus()
         self.t: Counter = Counter()
-        for name in ("_simulate", "_send_telemetry"):
-            fn = getattr(device, name)
-            setattr(device, name, self._timed(fn, name))
+        if self.child is None:
+            for name in ("_simulate", "_send_telemetry"):
+                fn = getattr(device, name)
+                setattr(device, name, self._timed(fn, name))
 
     def _timed(self, fn, name):
         def wrapper(*a, **k):
@@ -110,13 +118,16 @@ class _Timers:
         proc = getattr(rec, "_proc", None)
         if proc is not None and proc.pid is not None:
             out["writer"] = _cpu_of(Path(f"/proc/{proc.pid}/stat"))
+        if self.child is not None:
+            out["simulator process"] = _cpu_of(Path(f"/proc/{self.child.pid}/stat"))
         return out
 
     def take(self, clock) -> dict[str, float]:
         # simulate cpu: the thread's own CPU time in it; the rest of "simulate" is time the
         # thread waited for a core or for the interpreter (receiver, recorder, other load)
-        out = {"simulate_s": self.t["_simulate"], "simulate cpu_s": self.t["_simulate cpu"],
-               "send_s": self.t["_send_telemetry"], "clock_waits_s": clock.waited_s}
+        out = ({"simulate_s": self.t["_simulate"], "simulate cpu_s": self.t["_simulate cpu"],
+                "send_s": self.t["_send_telemetry"]} if self.child is None else {})
+        out["clock_waits_s"] = clock.waited_s
         cpu = self._cpus()
         for k, v in cpu.items():
             out[f"{k} cpu_s"] = max(0.0, v - self.cpu0.get(k, 0.0))
@@ -126,10 +137,11 @@ class _Timers:
         return out
 
 
-def campaign(tmp: str, pacing: FastPacing, between_steps: str, profile: bool) -> dict:
+def campaign(tmp: str, pacing: FastPacing, between_steps: str, fast_sim: str,
+             profile: bool) -> dict:
     with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=True,
                  log_folder=tmp, history=Path(tmp) / "history", pacing=pacing,
-                 between_steps=between_steps) as tb:
+                 between_steps=between_steps, fast_sim=fast_sim) as tb:
         tb.upload_design(ROOT / "profiles" / "controllers" / "relative_design2.toml")
         tb.start_recording("bench")
         timers = _Timers(tb._device, tb) if profile else None
@@ -160,7 +172,8 @@ def main() -> None:
     ap.add_argument("--profile", action="store_true", help="where the wall time goes, per phase")
     args = ap.parse_args()
     print(f"campaign benchmark - {machine()}, load average {os.getloadavg()[0]:.1f} at the start")
-    ways = {"pipelined": (FastPacing(), "held"), "one chunk": (ONE_CHUNK_IN_FLIGHT, "realtime")}
+    ways = {"ours": (FastPacing(), "held", "process"), "inline": (FastPacing(), "held", "inline"),
+            "one chunk": (ONE_CHUNK_IN_FLIGHT, "realtime", "inline")}
     runs: dict[str, list[dict]] = {k: [] for k in ways}
     limits: list[float] = []
     for r in range(args.rounds):
@@ -169,9 +182,9 @@ def main() -> None:
         if args.profile:
             print(f"  round {r + 1} simulator alone: {rate:6.1f}x, 60 s in {60.0 / rate:.2f} s "
                   f"wall, {cpu:.2f} s CPU")
-        for name, (pacing, between) in ways.items():
+        for name, (pacing, between, fast_sim) in ways.items():
             with tempfile.TemporaryDirectory() as tmp:
-                runs[name].append(campaign(tmp, pacing, between, args.profile))
+                runs[name].append(campaign(tmp, pacing, between, fast_sim, args.profile))
             x = runs[name][-1]
             # each round's ratios to the simulator alone measured just before it: the
             # machine's load moves both alike within a round, far less across rounds

@@ -26,8 +26,12 @@ process through sim/stepped_process.SteppedSimulatorProcess):
   held, the device runs chunks flat out while a profile plays; realtime, as long as
   the block lasts.
 - `until` (a host-side predicate on telemetry) is evaluated on whole chunks, each fully
-  received first; `device_until` (a predicate on the device, e.g. its `faulted`) after each
-  chunk without waiting - both end an advance at the same tick however fast it runs.
+  received first; `stop_on_fault` ends an advance after the chunk in which the device
+  latched a fault, judged on the device - both at the same tick however fast it runs.
+- a device in another process (SteppedSimulatorProcess, which has `step_ahead`) is sent
+  a dwell's chunks without the clock waiting for each to run: it always has the next one
+  queued, within the same credits; each step is made conditional on no fault latched,
+  so the chunks requested ahead end exactly where a fault was seen.
 """
 
 from __future__ import annotations
@@ -139,6 +143,8 @@ class SteppedClock:
         self._last_tick = -1
         self._seen = threading.Condition()
         self._in_flight: deque[int] = deque()   # last ticks of chunks not yet all received
+        self._requested = 0                      # chunks asked for ahead, not yet run
+        self._ahead_error: str | None = None     # why a chunk asked for ahead failed
         client.subscribe(self._on_block)
         self._lock = threading.Lock()          # one of idle / advance runs the device
         self._stop = threading.Event()
@@ -191,16 +197,42 @@ class SteppedClock:
                     return
                 self.device.run_ticks(step)
 
-    def _run(self, n: int, in_flight: int, only_while_playing: bool = False) -> int | None:
+    def _run(self, n: int, in_flight: int, only_while_playing: bool = False,
+             unless_faulted: bool = False) -> int | None:
         """n periods once fewer than `in_flight` chunks are unreceived and the recorder
-        keeps up; returns the last tick run (None: nothing ran, no profile playing)."""
+        keeps up; returns the last tick run (None: nothing ran, no profile playing or a
+        fault latched)."""
         self._wait_for_credit(in_flight - 1)
         last = self.device.step(n, datagram_bytes=self.pacing.datagram_bytes,
-                                only_while_playing=only_while_playing)
+                                only_while_playing=only_while_playing,
+                                unless_faulted=unless_faulted)
         if last is not None:
             with self._seen:
                 self._in_flight.append(last)
         return last
+
+    def _run_ahead(self, n: int, in_flight: int) -> None:
+        """_run for a device in another process, without waiting for the chunk to run."""
+        self._wait_for_credit(in_flight - 1)
+        with self._seen:
+            self._requested += 1
+        try:
+            self.device.step_ahead(n, self._stepped, datagram_bytes=self.pacing.datagram_bytes,
+                                   unless_faulted=True)
+        except BaseException:
+            with self._seen:
+                self._requested -= 1
+            raise
+
+    def _stepped(self, last: int | None, error: str | None) -> None:
+        """A chunk asked for ahead has run (on the device handle's reader thread)."""
+        with self._seen:
+            self._requested -= 1
+            if error is not None:
+                self._ahead_error = error
+            elif last is not None:
+                self._in_flight.append(last)
+            self._seen.notify_all()
 
     def _ran(self, last: int) -> None:
         """Held between steps: the device ran a command's confirmation period(s) itself
@@ -217,21 +249,28 @@ class SteppedClock:
         progress = self._last_tick
         with self._seen:
             while True:
+                if self._ahead_error is not None:
+                    error, self._ahead_error = self._ahead_error, None
+                    raise LinkLostError(error)
                 while self._in_flight and self._in_flight[0] <= self._last_tick:
                     self._in_flight.popleft()
+                unreceived = len(self._in_flight) + self._requested
                 backlog = self.recorder_backlog() if self.recorder_backlog is not None else 0.0
-                if len(self._in_flight) <= allowed and backlog <= RECORDER_QUEUE_LIMIT:
+                if unreceived <= allowed and backlog <= RECORDER_QUEUE_LIMIT:
                     break
                 if self._last_tick != progress:
                     progress, deadline = self._last_tick, time.monotonic() + FLOW_TIMEOUT_S
                 left = deadline - time.monotonic()
                 if left <= 0 or self.client.link_state != "up":
-                    what = (f"tick {self._last_tick} received, {self._in_flight[-1]} sent"
-                            if len(self._in_flight) > allowed else
+                    what = (f"tick {self._last_tick} received, "
+                            f"{self._in_flight[-1] if self._in_flight else 'more'} sent"
+                            f"{f', {self._requested} chunks not yet run' if self._requested else ''}"
+                            if unreceived > allowed else
                             f"the recorder's queue stays {backlog:.0%} full")
                     raise LinkLostError(f"telemetry stalled: {what}")
-                # frames wake us; the recorder's writer drains in another process: look again soon
-                self._seen.wait(min(left, 0.1 if len(self._in_flight) > allowed else 0.002))
+                # frames and chunks run wake us; the recorder's writer drains in another
+                # process: look again soon
+                self._seen.wait(min(left, 0.1 if unreceived > allowed else 0.002))
         self.waited_s += time.monotonic() - t0
 
     def drain(self) -> None:
@@ -267,21 +306,26 @@ class SteppedClock:
             raise self.error
 
     def advance(self, seconds: float, progress: Callable[[float], None] | None = None,
-                until: Callable[[], bool] | None = None,
-                device_until: Callable[[], bool] | None = None) -> None:
+                until: Callable[[], bool] | None = None, stop_on_fault: bool = False) -> None:
         """`seconds` of device time in chunks, pipelined; `until()` (on the host's
         telemetry) ends it after a chunk, judged with that chunk fully received (so with
-        one chunk in flight); `device_until()` (on the device) after a chunk, without
-        waiting.  Returns once every frame has been received."""
+        one chunk in flight); `stop_on_fault` after the chunk in which the device latched
+        a fault (judged on the device).  Returns once every frame has been received."""
         total = int(round(seconds * self.rate))
         in_flight = 1 if until is not None else self.pacing.in_flight
+        # a device in another process gets the chunks queued ahead (not with `until`,
+        # which needs each chunk received before the next is decided)
+        ahead = until is None and hasattr(self.device, "step_ahead")
         done = 0
         with self._lock:
             while done < total:
                 if self.abort.is_set():
                     raise ScriptAborted("aborted")
                 n = min(CHUNK_TICKS, total - done)
-                self._run(n, in_flight)
+                if ahead:
+                    self._run_ahead(n, in_flight)
+                elif self._run(n, in_flight, unless_faulted=stop_on_fault) is None:
+                    break                                    # a fault latched before it
                 done += n
                 if progress is not None:
                     progress(done / total)
@@ -289,7 +333,9 @@ class SteppedClock:
                     self.drain()
                     if until():
                         return
-                if device_until is not None and device_until():
+                # ahead, the fault seen may be a chunk or two late: the chunks asked for
+                # since then ran nothing (unless_faulted), so where it ends is exact
+                if stop_on_fault and self.device.faulted:
                     break
             self.drain()
 

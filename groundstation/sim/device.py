@@ -382,18 +382,22 @@ class SimulatedDevice:
                 self._send_telemetry(hk_frames, frame_groups=False)
             self._flush_events()
 
-    def step(self, n: int, *, datagram_bytes: int = 0, only_while_playing: bool = False
-             ) -> int | None:
+    def step(self, n: int, *, datagram_bytes: int = 0, only_while_playing: bool = False,
+             unless_faulted: bool = False) -> int | None:
         """The stepped clock's advance (manual pacing): n control periods and their
         telemetry, HIGH_RATE frames packed `datagram_bytes` to a datagram (0: as
         `frames_per_datagram` says) and sent after the others.  At the end the host counts as heard at the last tick:
         the clock that calls this is the host, and it runs the device only while it keeps
         up with the telemetry (a device-time heartbeat, the same value a HEARTBEAT sent
         after the periods would leave).  With `only_while_playing`, nothing runs unless a
-        profile is playing (checked under the device lock, so no command can come between).
+        profile is playing (checked under the device lock, so no command can come between);
+        with `unless_faulted`, nothing once the firmware has latched a fault (a dwell's
+        chunks requested ahead end where the fault was seen).
         Returns the tick of the last period run, or None when nothing ran."""
         with self._lock:
             if only_while_playing and not self.firmware.profile_active:
+                return None
+            if unless_faulted and self.firmware.fault:
                 return None
             frames, hk_frames = self._simulate(n)
             # EVENTs and HOUSEKEEPING first, HIGH_RATE last: the arrival of the last

@@ -15,8 +15,10 @@ loopback, exactly as with the in-process device; only the clock's stepping trave
 a private control channel: a socket pair whose child end the child inherits (no
 listening port), carrying pickled tuples (multiprocessing.connection framing).
 
-Requests, one at a time, each answered before the next:
-    ("step", n, datagram_bytes, only_while_playing) -> ("stepped", last tick or None, fault)
+Requests, answered in order (`step_ahead` sends steps without waiting for the replies,
+so the child always has the next chunk queued):
+    ("step", n, datagram_bytes, only_while_playing, unless_faulted)
+                                                    -> ("stepped", last tick or None, fault)
     ("run", n)                                      -> ("ok", fault)
     ("hold", datagram_bytes or None)                -> ("ok", fault)
     ("sync",)                                       -> ("ok", fault)
@@ -41,6 +43,7 @@ import subprocess
 import sys
 import tempfile
 import threading
+from collections import deque
 from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Callable
@@ -73,8 +76,10 @@ class SteppedSimulatorProcess:
         self.fg_resource: str | None = None
         self.proc: subprocess.Popen | None = None
         self._conn: Connection | None = None
-        self._replies: queue.Queue = queue.Queue()
-        self._request_lock = threading.Lock()
+        #: what to do with each reply still to come, in the order of the requests
+        self._pending: deque[Callable[[tuple], None]] = deque()
+        self._send_lock = threading.Lock()
+        self._dead: str = ""                 # why the channel closed, once it has
         self._on_ran: Callable[[int], None] | None = None
         self._fault = 0
         self._stderr = None
@@ -162,38 +167,72 @@ class SteppedSimulatorProcess:
             try:
                 msg = conn.recv()
             except (EOFError, OSError):
-                self._replies.put(("gone", "the fast simulated testbed's process ended"
-                                   + self._last_complaint()))
+                self._gone("the fast simulated testbed's process ended" + self._last_complaint())
                 return
             if msg[0] == "ran":
                 on_ran = self._on_ran
                 if on_ran is not None:
                     on_ran(msg[1])
-            else:
-                self._replies.put(msg)
+                continue
+            if msg[0] != "error":
+                self._fault = msg[-1]
+            with self._send_lock:
+                done = self._pending.popleft() if self._pending else None
+            if done is not None:
+                done(msg)
 
-    def _request(self, *msg):
-        with self._request_lock:
-            if self._conn is None or self.proc is None:
-                raise LinkLostError("the fast simulated testbed is not running")
+    def _gone(self, why: str) -> None:
+        """The channel closed: every request still waiting is answered with why."""
+        with self._send_lock:
+            self._dead = why
+            pending, self._pending = list(self._pending), deque()
+        for done in pending:
+            done(("gone", why))
+
+    def _send(self, msg: tuple, done: Callable[[tuple], None]) -> None:
+        """Send a request; `done(reply)` is called on the reader thread when its reply
+        comes (replies come in the order of the requests)."""
+        with self._send_lock:
+            if self._dead or self._conn is None:
+                raise LinkLostError(f"the fast simulated testbed: {self._dead or 'not running'}")
+            self._pending.append(done)
             try:
                 self._conn.send(msg)
             except OSError as exc:
+                self._pending.pop()
                 raise LinkLostError(f"the fast simulated testbed's process is gone: {exc}") from exc
-            try:
-                reply = self._replies.get(timeout=REPLY_TIMEOUT_S)
-            except queue.Empty:
-                raise LinkLostError(f"the fast simulated testbed did not answer {msg[0]} "
-                                    f"within {REPLY_TIMEOUT_S:g} s") from None
+
+    def _request(self, *msg):
+        waiter: queue.Queue = queue.Queue(maxsize=1)
+        self._send(msg, waiter.put)
+        try:
+            reply = waiter.get(timeout=REPLY_TIMEOUT_S)
+        except queue.Empty:
+            raise LinkLostError(f"the fast simulated testbed did not answer {msg[0]} "
+                                f"within {REPLY_TIMEOUT_S:g} s") from None
         if reply[0] in ("error", "gone"):
             raise LinkLostError(f"the fast simulated testbed: {reply[1]}")
-        self._fault = reply[-1]
         return reply
 
     # ------------------------------------------------------------------ what the clock uses
-    def step(self, n: int, *, datagram_bytes: int = 0, only_while_playing: bool = False) -> int | None:
+    def step(self, n: int, *, datagram_bytes: int = 0, only_while_playing: bool = False,
+             unless_faulted: bool = False) -> int | None:
         """SimulatedDevice.step in the child; the last tick run (None: nothing ran)."""
-        return self._request("step", int(n), int(datagram_bytes), bool(only_while_playing))[1]
+        return self._request("step", int(n), int(datagram_bytes), bool(only_while_playing),
+                             bool(unless_faulted))[1]
+
+    def step_ahead(self, n: int, done: Callable[[int | None, str | None], None], *,
+                   datagram_bytes: int = 0, unless_faulted: bool = False) -> None:
+        """step() without waiting for it: the request is queued in the child behind the
+        ones before it, and `done(last_tick, None)` - or `done(None, why)` on a failure -
+        is called on the reader thread once it has run.  The child then never waits for
+        the host's next request between two chunks."""
+        def answered(reply: tuple) -> None:
+            if reply[0] == "stepped":
+                done(reply[1], None)
+            else:
+                done(None, f"the fast simulated testbed: {reply[1]}")
+        self._send(("step", int(n), int(datagram_bytes), False, bool(unless_faulted)), answered)
 
     def run_ticks(self, n: int) -> None:
         self._request("run", int(n))
@@ -247,7 +286,8 @@ def _serve(conn: Connection, testbed: str, seed: int, generator: bool, host: str
                 return
             try:
                 if verb == "step":
-                    last = device.step(msg[1], datagram_bytes=msg[2], only_while_playing=msg[3])
+                    last = device.step(msg[1], datagram_bytes=msg[2], only_while_playing=msg[3],
+                                       unless_faulted=msg[4])
                     send(("stepped", last, fw.fault))
                     continue
                 if verb == "run":

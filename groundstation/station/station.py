@@ -468,8 +468,7 @@ class Station(GeneratorVerbs):
         # a fault ends the wait at once: the log then ends near the fault, not a minute on
         if isinstance(self.clock, SteppedClock):
             # judged on the device after each chunk: the same tick however fast it runs
-            device = self._device
-            self.clock.advance(seconds, progress, device_until=lambda: device.faulted)
+            self.clock.advance(seconds, progress, stop_on_fault=True)
         else:
             self.clock.advance(seconds, progress, until=lambda: self.state.fault)
         self._check_running()
