@@ -12,6 +12,8 @@ from __future__ import annotations
 import math
 
 import pyqtgraph as pg
+from PySide6.QtCore import QPointF, QRectF, Qt
+from PySide6.QtGui import QPainterPath
 
 #: margin on either side of the data when a range is chosen, as a fraction of the data's span
 MARGIN = 0.1
@@ -62,7 +64,45 @@ def sticky_range(lo: float, hi: float,
 class ChartViewBox(pg.ViewBox):
     """A ViewBox whose y autoscale (the usual "auto" state, menus included) follows
     `sticky_range` over the visible curves' bounds; x autoscale is never used by the
-    strip charts and is left to pyqtgraph."""
+    strip charts and is left to pyqtgraph.
+
+    Qt asks a view box for its bounding rect and shape several times a frame (see
+    chart_items.py), and pyqtgraph works them out in two Python calls each time; here
+    they are kept from one resize to the next.  Its paint draws a border the strip charts
+    do not have: Qt is told there is nothing to paint."""
+
+    def __init__(self, *args, **kwargs):
+        self._rect_cache = None
+        super().__init__(*args, **kwargs)
+        self._border_changed()
+
+    def setBorder(self, *args, **kwds):
+        super().setBorder(*args, **kwds)
+        self._border_changed()
+
+    def _border_changed(self) -> None:
+        # pyqtgraph's paint strokes the border pen only (an invisible NoPen by default)
+        no_border = self.border is None or self.border.style() == Qt.PenStyle.NoPen
+        self.setFlag(self.GraphicsItemFlag.ItemHasNoContents, no_border)
+        # and its border item, over the whole box, would be visited on every frame
+        self.borderRect.setVisible(not no_border)
+
+    def resizeEvent(self, ev):
+        self._rect_cache = None
+        super().resizeEvent(ev)
+
+    def boundingRect(self):
+        """pyqtgraph's (the rectangle, half a pixel larger right and below), kept."""
+        if self._rect_cache is None:
+            br = QRectF(QPointF(0, 0), self.size()).adjusted(0, 0, 0.5, 0.5)
+            path = QPainterPath()
+            path.addRect(br)
+            self._rect_cache = (br, path)
+        return self._rect_cache[0]
+
+    def shape(self):
+        self.boundingRect()
+        return self._rect_cache[1]
 
     def updateAutoRange(self):
         auto = self.state["autoRange"]

@@ -24,6 +24,7 @@ from PySide6.QtWidgets import QGraphicsItem, QMenu
 
 from .channel_tree import DisplayUnit, channel_ids_from_text
 from .chart_autoscale import ChartViewBox
+from .chart_items import LeanPlotItem, add_lean_legend
 
 
 def _cache_pixels(item: QGraphicsItem) -> None:
@@ -70,7 +71,31 @@ class _TextSizeCache:
         return getattr(self._p, name)
 
 
-class _ValueAxis(pg.AxisItem):
+class _KeptBounds:
+    """An axis's bounding rect, kept until its size or style changes: Qt asks for it
+    several times a frame (the axes border the curves' area), and pyqtgraph works it out
+    in Python from the style, the linked view and the geometry each time.  With a grid
+    the rect covers the linked view's, which can change at any time: not kept."""
+
+    _kept_rect = None
+
+    def boundingRect(self):
+        if self.grid is not False:
+            return super().boundingRect()
+        if self._kept_rect is None:
+            self._kept_rect = super().boundingRect()
+        return self._kept_rect
+
+    def resizeEvent(self, ev=None):
+        self._kept_rect = None
+        super().resizeEvent(ev)
+
+    def setStyle(self, **kwargs):
+        self._kept_rect = None
+        super().setStyle(**kwargs)
+
+
+class _ValueAxis(_KeptBounds, pg.AxisItem):
     """Left axis; its tick labels' sizes are cached."""
 
     def __init__(self) -> None:
@@ -81,7 +106,7 @@ class _ValueAxis(pg.AxisItem):
         return super().generateDrawSpecs(self._text_sizes.wrap(p))
 
 
-class _TimeAxis(pg.DateAxisItem):
+class _TimeAxis(_KeptBounds, pg.DateAxisItem):
     """Bottom axis: plain seconds in device time, wall-clock labels in host time, or
     (`relative`, a live chart) seconds before the newest sample."""
 
@@ -256,8 +281,8 @@ class ChartPlot(QObject):
     def __init__(self, parent: QObject | None = None):
         super().__init__(parent)
         self.time_axis = _TimeAxis()
-        self._pi = pi = pg.PlotItem(viewBox=ChartViewBox(),
-                                    axisItems={"bottom": self.time_axis, "left": _ValueAxis()})
+        self._pi = pi = LeanPlotItem(viewBox=ChartViewBox(),
+                                     axisItems={"bottom": self.time_axis, "left": _ValueAxis()})
         self.origin = 0.0          # absolute time of view x = 0 (see the module docstring)
         pi.setMinimumHeight(self.MIN_HEIGHT)
         # No grid by default: on the raster engine a translucent grid doubles the paint
@@ -266,7 +291,7 @@ class ChartPlot(QObject):
         pi.getAxis("left").setWidth(80)
         for side in ("left", "bottom"):
             _cache_pixels(pi.getAxis(side))
-        self.legend = pi.addLegend(offset=(4, 4), labelTextSize="8pt", brush=(0, 0, 0, 150))
+        self.legend = add_lean_legend(pi, offset=(4, 4), labelTextSize="8pt", brush=(0, 0, 0, 150))
         vb = pi.getViewBox()
         vb.setAutoVisible(y=True)
         vb.disableAutoRange(axis="x")

@@ -1,0 +1,76 @@
+"""The strip charts' plot items answer Qt's per-frame questions (bounding rect, shape)
+without Python where pyqtgraph's answer is Qt's own, or from a kept value: the answers
+must stay pyqtgraph's, and the legend must still work (clicking a sample hides its
+curve)."""
+
+from __future__ import annotations
+
+import pyqtgraph as pg
+import pytest
+from PySide6.QtCore import QRectF
+from PySide6.QtWidgets import QGraphicsItem
+
+from groundstation.display_buffers import TelemetryStore
+from groundstation.gui.chart_items import LeanLegend, LeanPlotItem
+from groundstation.gui.charts import StripChartPanel
+
+
+@pytest.fixture
+def panel(qtbot, dictionary):
+    p = StripChartPanel(TelemetryStore(dictionary, seconds=10.0), dictionary)
+    qtbot.addWidget(p)
+    p.resize(900, 600)
+    p.show()
+    qtbot.waitExposed(p)
+    p._timer.stop()
+    p.set_layout([["HIGH_RATE.error_angle", "HIGH_RATE.encoder_outer"], ["HIGH_RATE.gyro_rate"]])
+    return p
+
+
+def _rect(r: QRectF) -> tuple:
+    return (r.x(), r.y(), r.width(), r.height())
+
+
+def test_lean_items_answer_as_pyqtgraph(panel, qtbot):
+    plot = panel.plots[0]
+    pi = plot.getPlotItem()
+    assert isinstance(pi, LeanPlotItem) and isinstance(plot.legend, LeanLegend)
+    assert _rect(pi.boundingRect()) == _rect(pg.GraphicsWidget.boundingRect(pi))
+    legend = plot.legend
+    assert _rect(legend.boundingRect()) == _rect(pg.LegendItem.boundingRect(legend))
+    for sample, label in legend.items:
+        assert _rect(sample.boundingRect()) == (0, 0, 20, 20)
+        assert _rect(label.boundingRect()) == _rect(pg.GraphicsWidget.boundingRect(label))
+    vb = pi.getViewBox()
+    assert _rect(vb.boundingRect()) == _rect(pg.ViewBox.boundingRect(vb))
+    assert vb.shape().boundingRect() == vb.boundingRect()
+    assert vb.flags() & QGraphicsItem.GraphicsItemFlag.ItemHasNoContents
+    # after a resize the kept rects follow
+    panel.resize(700, 900)
+    qtbot.waitUntil(lambda: vb.width() < 650, timeout=5000)
+    assert _rect(vb.boundingRect()) == _rect(pg.ViewBox.boundingRect(vb))
+    for axis in (pi.getAxis("left"), plot.time_axis, panel.plots[1].time_axis):
+        assert _rect(axis.boundingRect()) == _rect(pg.AxisItem.boundingRect(axis))
+    # with a grid an axis's rect covers the linked view's, as pyqtgraph's does
+    axis = pi.getAxis("left")
+    axis.setGrid(80)
+    assert _rect(axis.boundingRect()) == _rect(pg.AxisItem.boundingRect(axis))
+    assert axis.boundingRect().width() > 100
+
+
+def test_legend_sample_click_still_hides_its_curve(panel):
+    plot = panel.plots[0]
+    sample, _ = plot.legend.items[0]
+    curve = plot.curves["HIGH_RATE.error_angle"]
+    assert curve.isVisible()
+
+    class Click:                   # what pyqtgraph's scene hands an item on a click
+        def button(self):
+            from PySide6.QtCore import Qt
+            return Qt.MouseButton.LeftButton
+
+        def accept(self):
+            self.accepted = True
+
+    sample.mouseClickEvent(Click())
+    assert not curve.isVisible()
