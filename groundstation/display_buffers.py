@@ -7,7 +7,8 @@ marks so a chart can show them instead of drawing a line across lost data.
 
 For the strip charts each ring also keeps, per channel shown, a min/max pyramid
 (`MinMaxPyramid`): the min and max of aligned blocks of 16, 256 and 4096 samples,
-extended with only the samples that arrived since the last look.  `PacketRing.envelope`
+extended with the samples that arrived since the last look when many bins are asked for
+(a scrolling frame's few new bins come straight from the samples).  `PacketRing.envelope`
 answers "min and max per bin of `per` samples over this window" from it, exactly, in a
 time that depends on the number of bins, not on the number of samples in the window.
 Bins are aligned to the sample count since the ring was cleared (bin k holds samples
@@ -306,9 +307,12 @@ class PacketRing:
         return out
 
     def _whole_bins(self, channel: str, k0: int, k1: int, per: int) -> tuple[np.ndarray, np.ndarray]:
-        """Min and max of complete bins k0 .. k1-1 of `per` samples (lock held)."""
+        """Min and max of complete bins k0 .. k1-1 of `per` samples (lock held).  A few
+        bins (a scrolling frame's newly completed ones) straight from the samples; many
+        (a new window, a new width) from the pyramid, which is fed only then: feeding it
+        the samples of every frame cost more than reducing the bins they complete."""
         block = max((b for b in PYRAMID_BLOCKS if b <= per), default=0)
-        if block:
+        if block and (k1 - k0) * per > DIRECT_REDUCE_MAX:
             return self._pyramid(channel).bins(PYRAMID_BLOCKS.index(block), k0 * per, k1 * per, per)
         whole = self._take(self._data[channel], k0 * per, k1 * per).reshape(-1, per)
         return whole.min(axis=1), whole.max(axis=1)
@@ -387,6 +391,9 @@ class _BinCache:
 
 #: block sizes (samples) of a pyramid's levels; each block is 16 blocks of the level below
 PYRAMID_BLOCKS = (16, 256, 4096)
+#: complete bins of at most this many samples in all are reduced from the samples, not
+#: from the pyramid (a scrolling frame completes one or two)
+DIRECT_REDUCE_MAX = 4096
 
 
 class _MinMaxLevel:

@@ -195,3 +195,49 @@ def test_nothing_new_nothing_redrawn(panel, dictionary):
     panel._on_timer()
     assert len(calls) == 3
     assert panel.plots[0].x_range() == pytest.approx((2439 / RATE - 2.0, 2439 / RATE))
+
+
+def test_pyramid_fed_only_for_wide_requests_catches_up_exactly(dictionary):
+    """A scrolling chart's frames complete a bin or two, reduced from the samples; the
+    pyramid is fed only when many bins are asked for (a new window or width) - after a
+    few seconds of scrolling, and after the ring wrapped past what it had been fed."""
+    import groundstation.display_buffers as db
+
+    store = TelemetryStore(dictionary, seconds=5.0)             # 6,000 HIGH_RATE samples
+    ring = store.ring("HIGH_RATE")
+    feed = HighRateFeeder(dictionary, store)
+    rng = np.random.default_rng(8)
+    ts, ys = [], []
+    total = 0
+
+    def check(window, bins):
+        t, y = np.concatenate(ts)[-ring.capacity:], np.concatenate(ys)[-ring.capacity:]
+        nn = np.arange(total - len(t), total)
+        end = t[-1]
+        env = ring.envelope(["error_angle"], end - window, end, bins, before=False)
+        x, p, per = brute_force(nn, t, y, end - window, end, bins, before=False)
+        assert env.per == per
+        assert np.array_equal(env.x, x) and np.array_equal(env.values["error_angle"], p)
+        return per
+
+    fed = []
+    for step in range(400):
+        s = np.arange(total, total + 40)
+        y = np.sin(s / 300.0) + 0.1 * rng.standard_normal(40)
+        feed(s, error_angle=y)
+        ts.append(s / RATE)
+        ys.append(y.astype(np.float32).astype(np.float64))
+        total += 40
+        check(5.0, 90)                       # the scrolling frame: a few new bins
+        if step in (200, 399):               # a wide request: many bins, from the pyramid
+            assert check(5.0, 200) == 32 and check(5.0, 20) == 512
+        pyr = ring._pyramids.get("error_angle")
+        fed.append(pyr.fed if pyr is not None else None)
+    # The window was full (6,000 samples, 64 a bin) from step 150 on.  The pyramid was
+    # fed up to the newest sample for the wide requests, once more for the next frame
+    # (its bins of 64 were all reduced again after the wide requests' 32 and 512), and
+    # not while scrolling in between; at step 399 the ring had wrapped past what it had
+    # been fed: built anew.
+    assert fed[200] == 201 * 40 and fed[201] == 202 * 40 and fed[399] == 400 * 40
+    assert fed[202:399] == [fed[201]] * 197
+    assert 6000 > db.DIRECT_REDUCE_MAX

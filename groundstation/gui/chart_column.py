@@ -80,6 +80,10 @@ class PlotColumn(pg.GraphicsView):
         # data areas: QPainter clips to the exposed region, and a region of several
         # rectangles is a complex clip for every stroke of the raster engine.
         self.setViewportUpdateMode(self.ViewportUpdateMode.BoundingRectViewportUpdate)
+        # The background is plain black: filling the exposed rectangle is cheaper than
+        # copying it from pyqtgraph's cached background pixmap (0.2-0.35 ms a frame of
+        # 2.7-3.5 for the four plots, measured in one process, alternating).
+        self.setCacheMode(self.CacheModeFlag.CacheNone)
         # pyqtgraph's GraphicsView ignores drag events; the column takes channel drops
         self.setAcceptDrops(True)
 
