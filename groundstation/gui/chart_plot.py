@@ -180,26 +180,31 @@ class ChartCurve(pg.PlotCurveItem):
             self.setData(x, y)
             self._extent = self._boundingRect = None
             return
-        a, b = int(np.searchsorted(x, lo, side="left")), int(np.searchsorted(x, hi, side="right"))
-        inside = y[a:b]
-        finite = not np.isnan(y).any()
-        if finite:
-            ybounds = (float(inside.min()), float(inside.max())) if len(inside) else (None, None)
-            # live, every point is inside the window: the same extent, not a second scan
-            ya, yb = ybounds if len(inside) == len(y) else (float(y.min()), float(y.max()))
+        x0, x1 = float(x[0]), float(x[-1])
+        # min and max carry a NaN through: one pass each also says whether all are finite
+        ya, yb = float(np.minimum.reduce(y)), float(np.maximum.reduce(y))
+        finite = not (math.isnan(ya) or math.isnan(yb))
+        if finite and lo <= x0 and x1 <= hi:
+            ybounds = (ya, yb)           # live: every point is inside the window
         else:
-            ybounds = ((float(np.nanmin(inside)), float(np.nanmax(inside)))
-                       if len(inside) and not np.isnan(inside).all() else (None, None))
-            ya, yb = ((float(np.nanmin(y)), float(np.nanmax(y)))
-                      if not np.isnan(y).all() else (math.nan, math.nan))
+            a, b = int(x.searchsorted(lo, side="left")), int(x.searchsorted(hi, side="right"))
+            inside = y[a:b]
+            if finite:
+                ybounds = ((float(inside.min()), float(inside.max())) if len(inside)
+                           else (None, None))
+            else:
+                ybounds = ((float(np.nanmin(inside)), float(np.nanmax(inside)))
+                           if len(inside) and not np.isnan(inside).all() else (None, None))
+                ya, yb = ((float(np.nanmin(y)), float(np.nanmax(y)))
+                          if not np.isnan(y).all() else (math.nan, math.nan))
         self._ybounds = ybounds if ybounds[0] is not None else None
         self._finite, self._poly_stale = finite, True
         if finite:
             self._set_finite(x, y)
         else:
             self.setData(x, y, connect="finite", skipFiniteCheck=False)
-        self._bounds = ((float(x[0]), float(x[-1])), ybounds)
-        self._extent = (float(x[0]), float(x[-1]), ya, yb) if math.isfinite(ya) else None
+        self._bounds = ((x0, x1), ybounds)
+        self._extent = (x0, x1, ya, yb) if math.isfinite(ya) else None
         self._boundingRect = None
 
     def _set_finite(self, x: np.ndarray, y: np.ndarray) -> None:
