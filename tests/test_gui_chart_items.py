@@ -74,3 +74,14 @@ def test_legend_sample_click_still_hides_its_curve(panel):
 
     sample.mouseClickEvent(Click())
     assert not curve.isVisible()
+
+
+def test_curve_signals_a_listener_only_when_there_is_one(panel):
+    import numpy as np
+
+    curve = panel.plots[0].curves["HIGH_RATE.error_angle"]
+    curve.set_points(np.arange(3.0), np.zeros(3), 0.0, 5.0)      # nobody listens: fine
+    got = []
+    curve.sigPlotChanged.connect(got.append)
+    curve.set_points(np.arange(3.0), np.ones(3), 0.0, 5.0)
+    assert got == [curve]

@@ -153,6 +153,10 @@ class _TimeAxis(_KeptBounds, pg.DateAxisItem):
         self.showLabel(shown)
 
 
+_PLOT_CHANGED = pg.PlotCurveItem.staticMetaObject.method(
+    pg.PlotCurveItem.staticMetaObject.indexOfSignal("sigPlotChanged(PyObject)"))
+
+
 class ChartCurve(pg.PlotCurveItem):
     """A strip chart's curve: a bare PlotCurveItem (the panel clips and decimates, so
     PlotDataItem's own clipping, downsampling and dataset bookkeeping are not needed),
@@ -221,7 +225,10 @@ class ChartCurve(pg.PlotCurveItem):
         self._fillPathList = self._mouseShape = None
         self._lineSegmentsRendered = False
         self.update()
-        self.sigPlotChanged.emit(self)
+        # nothing listens on the strip charts (pyqtgraph connects it for FillBetweenItem
+        # only); asking is a quarter of the cost of emitting to nobody
+        if self.isSignalConnected(_PLOT_CHANGED):
+            self.sigPlotChanged.emit(self)
 
     def paint(self, p, opt, widget):
         """Finite points as one polyline from a reused QPolygonF: the same strokes as
