@@ -3,9 +3,9 @@
 Qt asks every item in the exposed part of a scene for its `boundingRect` (and the view
 boxes for their `shape`, to clip) several times per paint.  pyqtgraph implements these
 in Python for its GraphicsWidgets, so each question is a call from C++ into Python
-through shiboken: about 150 of them a frame for the strip charts' four plots (counted),
-each several times the cost of the C++ answer (2 vs 17 us an item in a scene of plain
-widgets, measured).  For the widgets below pyqtgraph's answer is the C++ one - the
+through shiboken: about 200 of them a frame for the strip charts' four plots (counted;
+76 for the classes below), each several times the cost of the C++ answer (2 vs 17 us an
+item in a scene of plain widgets, measured).  For the widgets below pyqtgraph's answer is the C++ one - the
 widget's own rectangle (`rect()`; they are not transformed, and an ItemSample is 20 x
 20 px, fixed) - so naming the C++ methods in the subclass makes shiboken find no Python
 override and Qt answer without Python.
