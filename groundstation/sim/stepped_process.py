@@ -37,6 +37,7 @@ ground station that dies leaves no simulator behind.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import queue
 import socket
 import subprocess
@@ -121,10 +122,8 @@ class SteppedSimulatorProcess:
         proc, self.proc = self.proc, None
         conn = self._conn
         if conn is not None and proc is not None and proc.poll() is None:
-            try:
+            with contextlib.suppress(OSError):          # already gone: terminated below
                 conn.send(("stop",))
-            except OSError:              # already gone: terminate below
-                pass
         if proc is not None:
             try:
                 proc.wait(timeout=5)
@@ -137,11 +136,9 @@ class SteppedSimulatorProcess:
                     proc.wait()
         if conn is not None:
             # a shutdown wakes the reader thread blocked in recv (a close alone would not)
-            try:
-                with socket.fromfd(conn.fileno(), socket.AF_UNIX, socket.SOCK_STREAM) as sock:
-                    sock.shutdown(socket.SHUT_RDWR)
-            except OSError:              # already shut by the child's end
-                pass
+            with contextlib.suppress(OSError), \
+                    socket.fromfd(conn.fileno(), socket.AF_UNIX, socket.SOCK_STREAM) as sock:
+                sock.shutdown(socket.SHUT_RDWR)          # (OSError: the child's end shut it)
             conn.close()
         if self._reader is not None and self._reader is not threading.current_thread():
             self._reader.join(timeout=5)
