@@ -61,6 +61,9 @@ def test_record_then_replay_the_same_values(qtbot, window, tmp_path):
     with LogReader(logs[0]) as r:
         recorded = r.read("HIGH_RATE", ["encoder_inner", "tick"])
         assert r.summary().notes == "from the window"
+        # the log says which device it came from, and how to run it again
+        assert [j.data for j in r.journal("testbed")] == [
+            {"device": "simulated testbed", "seed": 0, "clock": "real time x1"}]
     assert len(recorded["tick"]) > 2400
 
     window.session.open_log(str(logs[0]))

@@ -113,3 +113,18 @@ def test_a_session_with_the_process_simulator_and_its_generator(tmp_path):
         assert tb.generator is not None and tb._device.fg_resource
         tb.dwell(0.5)
         assert tb.state.tick >= 600
+
+
+def test_the_log_names_the_simulators_seed(tmp_path):
+    """A log of the simulated testbed says what it takes to run it again: its seed and
+    its clock."""
+    from groundstation.logs.reader import LogReader
+
+    with Testbed("sim", testbed=TESTBED, fast=True, fast_sim="process", seed=7,
+                 log_folder=tmp_path) as tb:
+        tb.start_recording("seeded")
+        tb.dwell(0.1)
+        path = tb.stop_recording()["files"][0]
+    with LogReader(path) as log:
+        records = [r.data for r in log.journal("testbed")]
+    assert records == [{"device": "simulated testbed", "seed": 7, "clock": "script (fast)"}]

@@ -36,6 +36,7 @@ from .session_profiles import ProfilePlaybackMixin
 from ..limits import LimitMonitor
 from ..params.upload import ParameterHistory
 from ..sim.process import SimulatorProcess
+from ..station.recording import device_record
 from ..station.station import Station
 from ..display_buffers import TelemetryStore
 from .campaign_runner import CampaignController
@@ -473,6 +474,9 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
             self.sig_recording_failed.emit(str(exc))
             return None
         self.recorder = rec
+        rec.record("testbed", device_record(self.address == "sim", address=self.address,
+                                            seed=self.sim.seed if self.sim else 0,
+                                            speed=self.sim_speed))
         if self.client is not None:
             self._detach_recorder = attach_recorder(self.client, rec)
         if notes:

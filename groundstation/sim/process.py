@@ -33,6 +33,7 @@ class SimulatorProcess:
         if fg_port is not None:             # serve the function generator too (0: any port)
             self.args += ["--fg-port", str(fg_port)]
         self.start_timeout = start_timeout
+        self.seed = seed
         self.proc: subprocess.Popen | None = None
         self.address: str = ""
         #: the simulated generator's VISA resource (TCPIP0::HOST::PORT::SOCKET), if served

@@ -134,6 +134,18 @@ class RecordingSlot:
             rec.record("event", {"source": source, "text": text, **extra})
 
 
+def device_record(simulated: bool, *, address: str = "", seed: int = 0, fast: bool = False,
+                  speed: float = 1.0) -> dict:
+    """What a log's journal says of the device the session talks to: for the simulated
+    testbed, what it takes to run it again the same way (its seed; device time driven by
+    the script, or real time at `speed`); for a rig, its address."""
+    if simulated:
+        # (no address: a loopback port chosen afresh each time, which says nothing)
+        return {"device": "simulated testbed", "seed": int(seed),
+                "clock": "script (fast)" if fast else f"real time x{speed:g}"}
+    return {"device": "rig", "address": address}
+
+
 def link_drops(client) -> int:
     """Frames lost on the link so far (sequence gaps, every packet)."""
     if client is None:

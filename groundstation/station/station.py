@@ -52,7 +52,7 @@ from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
 from .generator_verbs import GeneratorVerbs
-from .recording import RecordingSlot
+from .recording import RecordingSlot, device_record
 from .settling import settle_rig
 from .start_state import StartCriteria
 from .tracker import DeviceStateTracker
@@ -511,6 +511,10 @@ class Station(GeneratorVerbs):
         path = self.recording.start(self.client, self.d, self.testbed, self.log_folder, name, notes,
                                     chunk_rows=FAST_CHUNK_ROWS if fast else None,
                                     writer_niceness=FAST_WRITER_NICENESS if fast else 0)
+        if self.device_spec != "attached":     # (attached: the window's recording says it)
+            self.recording.journal("testbed", device_record(
+                self.device_spec == "sim", address=self.address, seed=self.seed, fast=fast,
+                speed=self.speed))
         if isinstance(self.clock, SteppedClock):
             self.clock.tick_over()          # held device time: the log opens with telemetry
         return path
