@@ -70,6 +70,24 @@ def dictionary():
 
 
 @pytest.fixture
+def strip_chart(qtbot, dictionary):
+    """Make a strip-chart panel on (offscreen) screen with its refresh timer stopped, so
+    the test refreshes by hand: strip_chart(store_seconds, (width, height))."""
+    from groundstation.display_buffers import TelemetryStore
+    from groundstation.gui.charts import StripChartPanel
+
+    def make(seconds: float, size: tuple[int, int]):
+        panel = StripChartPanel(TelemetryStore(dictionary, seconds=seconds), dictionary)
+        qtbot.addWidget(panel)
+        panel.resize(*size)
+        panel.show()
+        qtbot.waitExposed(panel)
+        panel._timer.stop()
+        return panel
+    return make
+
+
+@pytest.fixture
 def device(dictionary):
     """A simulated device whose clock the test advances (pacing='manual')."""
     dev = SimulatedDevice(dictionary, pacing="manual", seed=1).start()

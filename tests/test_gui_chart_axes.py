@@ -9,9 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from groundstation.display_buffers import TelemetryStore
 from groundstation.gui.chart_autoscale import EDGE, nice_range, nice_step, sticky_range
-from groundstation.gui.charts import StripChartPanel
 
 from conftest import HighRateFeeder
 
@@ -19,14 +17,8 @@ RATE = 1200.0
 
 
 @pytest.fixture
-def panel(qtbot, dictionary):
-    p = StripChartPanel(TelemetryStore(dictionary, seconds=30.0), dictionary)
-    qtbot.addWidget(p)
-    p.resize(800, 500)
-    p.show()
-    qtbot.waitExposed(p)
-    p._timer.stop()                    # the test refreshes by hand
-    return p
+def panel(strip_chart):
+    return strip_chart(30.0, (800, 500))
 
 
 # ---------------------------------------------------------------- y range

@@ -12,9 +12,7 @@ from PySide6.QtCore import QEvent, QMimeData, QObject, QPoint, QPointF, Qt
 from PySide6.QtGui import QDragEnterEvent, QDropEvent, QMouseEvent
 from PySide6.QtWidgets import QApplication, QGraphicsView
 
-from groundstation.display_buffers import TelemetryStore
 from groundstation.gui.chart_column import HANDLE_PX
-from groundstation.gui.charts import StripChartPanel
 
 from conftest import HighRateFeeder
 
@@ -24,14 +22,8 @@ LAYOUT = [["HIGH_RATE.error_angle"], ["HIGH_RATE.encoder_outer"],
 
 
 @pytest.fixture
-def panel(qtbot, dictionary):
-    p = StripChartPanel(TelemetryStore(dictionary, seconds=30.0), dictionary)
-    qtbot.addWidget(p)
-    p.resize(900, 700)
-    p.show()
-    qtbot.waitExposed(p)
-    p._timer.stop()                    # the test refreshes by hand
-    return p
+def panel(strip_chart):
+    return strip_chart(30.0, (900, 700))
 
 
 class _Paints(QObject):

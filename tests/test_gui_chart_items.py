@@ -10,19 +10,12 @@ import pytest
 from PySide6.QtCore import QRectF
 from PySide6.QtWidgets import QGraphicsItem
 
-from groundstation.display_buffers import TelemetryStore
 from groundstation.gui.chart_items import LeanLegend, LeanPlotItem
-from groundstation.gui.charts import StripChartPanel
 
 
 @pytest.fixture
-def panel(qtbot, dictionary):
-    p = StripChartPanel(TelemetryStore(dictionary, seconds=10.0), dictionary)
-    qtbot.addWidget(p)
-    p.resize(900, 600)
-    p.show()
-    qtbot.waitExposed(p)
-    p._timer.stop()
+def panel(strip_chart):
+    p = strip_chart(10.0, (900, 600))
     p.set_layout([["HIGH_RATE.error_angle", "HIGH_RATE.encoder_outer"], ["HIGH_RATE.gyro_rate"]])
     return p
 
