@@ -102,17 +102,20 @@ class SteppedSimulatorProcess:
             child_end.close()
         self._conn = Connection(parent_end.detach())
         if not self._conn.poll(self.start_timeout):
+            why = self._last_complaint()
             self.stop()
             raise LinkError(f"the fast simulated testbed did not start within "
-                            f"{self.start_timeout:g} s{self._last_complaint()}")
+                            f"{self.start_timeout:g} s{why}")
         try:
             first = self._conn.recv()
         except (EOFError, OSError):
             first = ("error", "it exited while starting")
         if first[0] != "ready":
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                self.proc.wait(timeout=10)       # its last words are in stderr once it ends
+            why = self._last_complaint()
             self.stop()
-            raise LinkError(f"the fast simulated testbed did not start: {first[1]}"
-                            f"{self._last_complaint()}")
+            raise LinkError(f"the fast simulated testbed did not start: {first[1]}{why}")
         _, self.tcp_port, self.fg_resource = first
         self._reader = threading.Thread(target=self._read, name="gs-sim-control", daemon=True)
         self._reader.start()
@@ -122,7 +125,7 @@ class SteppedSimulatorProcess:
         proc, self.proc = self.proc, None
         conn = self._conn
         if conn is not None and proc is not None and proc.poll() is None:
-            with contextlib.suppress(OSError):          # already gone: terminated below
+            with self._send_lock, contextlib.suppress(OSError):   # gone: terminated below
                 conn.send(("stop",))
         if proc is not None:
             try:
@@ -140,19 +143,20 @@ class SteppedSimulatorProcess:
                     socket.fromfd(conn.fileno(), socket.AF_UNIX, socket.SOCK_STREAM) as sock:
                 sock.shutdown(socket.SHUT_RDWR)          # (OSError: the child's end shut it)
             conn.close()
-        if self._reader is not None and self._reader is not threading.current_thread():
-            self._reader.join(timeout=5)
         if self._stderr is not None:
             self._stderr.close()
             self._stderr = None
+        if self._reader is not None and self._reader is not threading.current_thread():
+            self._reader.join(timeout=5)
 
     def _last_complaint(self) -> str:
         """The last line the child wrote to stderr, for an error message."""
-        if self._stderr is None:
+        stderr = self._stderr              # (stop() may close it meanwhile: ValueError)
+        if stderr is None:
             return ""
         try:
-            self._stderr.seek(0)
-            lines = self._stderr.read().decode(errors="replace").strip().splitlines()
+            stderr.seek(0)
+            lines = stderr.read().decode(errors="replace").strip().splitlines()
         except (OSError, ValueError):
             return ""
         return f": {lines[-1]}" if lines else ""
