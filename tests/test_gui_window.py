@@ -53,7 +53,10 @@ def test_record_then_replay_the_same_values(qtbot, window, tmp_path):
     qtbot.waitUntil(lambda: window.session.recorder is not None
                     and window.session.recorder.status().frames > 1200, timeout=30000)
     window.commands.send("SET_MODE", mode="OPEN_LOOP")      # an EVENT inside the recording
-    qtbot.waitUntil(lambda: window.session.recorder.status().frames > 2400, timeout=30000)
+    # the recorder counts every packet's frames; HIGH_RATE is 120 of every 121 of them (a
+    # HOUSEKEEPING frame each 0.1 s) plus the EVENTs: 2500 in all leaves more than the
+    # 2400 HIGH_RATE frames asserted below (waiting for 2400 in all had left 2394 once)
+    qtbot.waitUntil(lambda: window.session.recorder.status().frames > 2500, timeout=30000)
     qtbot.mouseClick(window.recording.button, Qt.MouseButton.LeftButton)
     qtbot.waitUntil(lambda: "stopped" in window.recording.info.text(), timeout=30000)
     logs = sorted((tmp_path / "logs").glob("*gui-test*.h5"))
