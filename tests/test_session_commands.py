@@ -30,13 +30,20 @@ class HeldSend:
         self.sent.append(self.name)
 
 
-def test_commands_are_sent_in_the_order_given_by_one_sender():
+def _one_held_out(name: str) -> tuple[list[threading.Thread], CommandQueue, list[str], HeldSend]:
+    """A queue whose sender threads are listed, with `name` submitted and held out
+    (sent, not yet answered); the names sent, in order."""
     threads: list[threading.Thread] = []
     queue = CommandQueue(start_thread(threads))
     sent: list[str] = []
-    first = HeldSend("SET_MODE", sent)
-    queue.submit("SET_MODE", first)
-    assert first.started.wait(10.0)
+    held = HeldSend(name, sent)
+    queue.submit(name, held)
+    assert held.started.wait(10.0)
+    return threads, queue, sent, held
+
+
+def test_commands_are_sent_in_the_order_given_by_one_sender():
+    threads, queue, sent, first = _one_held_out("SET_MODE")
     # while SET_MODE is out, the others wait in line behind it
     for name in ("ARM", "SET_CURRENTS", "SET_REFERENCE"):
         queue.submit(name, lambda name=name: sent.append(name))
@@ -53,12 +60,7 @@ def test_commands_are_sent_in_the_order_given_by_one_sender():
 
 
 def test_drop_waiting_forgets_what_has_not_gone_out():
-    threads: list[threading.Thread] = []
-    queue = CommandQueue(start_thread(threads))
-    sent: list[str] = []
-    current = HeldSend("SET_CURRENTS", sent)
-    queue.submit("SET_CURRENTS", current)
-    assert current.started.wait(10.0)
+    threads, queue, sent, current = _one_held_out("SET_CURRENTS")
     queue.submit("SET_MODE", lambda: sent.append("SET_MODE"))
     queue.submit("ARM", lambda: sent.append("ARM"))
     assert queue.drop_waiting() == ["SET_MODE", "ARM"]

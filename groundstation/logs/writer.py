@@ -12,6 +12,7 @@ with the same codec, so nothing heavier than the wire format crosses the pipe.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import queue
 import resource
@@ -52,10 +53,9 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
     # writer notices (below) and closes the file itself.
     ignore_terminal_interrupt()
     if config.get("writer_niceness"):
-        try:
+        # not permitted here (OSError): the writer runs at the usual priority
+        with contextlib.suppress(OSError):
             os.nice(config["writer_niceness"])
-        except OSError:        # not permitted here: the writer runs at the usual priority
-            pass
     d = load_dictionary(protocol_dir)
     codec = FrameCodec(d)
     parent = os.getppid()

@@ -9,8 +9,8 @@ core - to itself, as a rig does; the receiver and the log writer share the other
 
 `SteppedSimulatorProcess` is the parent's stand-in for an in-process SimulatedDevice,
 with the part of its interface the stepped clock uses (`step`, `run_ticks`,
-`hold_between_steps`, `sync`, `faulted`, `dictionary`, `housekeeping_divider`,
-`tcp_port`, `stop`).  Telemetry and commands still go over the wire protocol on
+`hold_between_steps`, `sync`, `faulted`, `dictionary`, `tcp_port`, `stop`) and
+`step_ahead`, which only a device in another process needs.  Telemetry and commands still go over the wire protocol on
 loopback, exactly as with the in-process device; only the clock's stepping travels over
 a private control channel: a socket pair whose child end the child inherits (no
 listening port), carrying pickled tuples (multiprocessing.connection framing).
@@ -64,9 +64,6 @@ class SteppedSimulatorProcess:
                  generator: bool = False, host: str = "127.0.0.1",
                  start_timeout: float = START_TIMEOUT_S):
         self.dictionary = dictionary
-        self.rate = dictionary.control_rate_hz
-        from .device import housekeeping_divider
-        self.housekeeping_divider = housekeeping_divider(dictionary)
         self.args = [sys.executable, "-m", "groundstation.sim.stepped_process",
                      "--testbed", str(testbed), "--seed", str(int(seed)), "--host", host]
         if generator:
