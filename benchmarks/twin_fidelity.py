@@ -130,6 +130,12 @@ def figures(out, truth, testbed) -> dict[str, float]:
             "base_rms_mrad": float(np.std(truth[:, 2])) * 1e3}
 
 
+def _psd_path(bm: str) -> Path:
+    """A profile's stem in profiles/base_motion (BM1) or a PSD table's path."""
+    path = Path(bm)
+    return path if path.suffix == ".csv" else BASE_MOTION / f"{bm}.csv"
+
+
 def inertial_run(design: str, bm: str, args) -> dict[str, float]:
     tb = testbed_with(TESTBEDS / "inertial_2dof.toml", args.set)
     eng, _ = make_engine(design, tb, args.param, args.seed)
@@ -138,7 +144,7 @@ def inertial_run(design: str, bm: str, args) -> dict[str, float]:
     run(eng, args.settle)
     volts = None
     if bm != "none":
-        psd = load_psd(BASE_MOTION / f"{bm}.csv")
+        psd = load_psd(_psd_path(bm))
         profile = make_profile(psd, BaseStageModel.from_testbed(load_testbed(TESTBEDS / "inertial_2dof.toml")),
                                seed=args.profile_seed, target_rms_rad=psd.rms_rad() * args.bm_scale)
         volts = drive_volts(profile, args.seconds)
@@ -182,7 +188,9 @@ def main() -> int:
     ap.add_argument("--step-mrad", type=float, default=1.0)
     ap.add_argument("--back", type=float, default=3.0)
     ap.add_argument("--design", default="inertial_design1")
-    ap.add_argument("--bm", default="BM1")
+    ap.add_argument("--bm", default=None,
+                    help="profile stems in profiles/base_motion or PSD .csv paths, comma-separated "
+                         "(default: BM1, or BM1-BM3 with --all)")
     ap.add_argument("--all", action="store_true", help="open loop + the three designs under BM1-BM3")
     ap.add_argument("--seconds", type=float, default=60.0)
     ap.add_argument("--settle", type=float, default=5.0)
@@ -201,14 +209,15 @@ def main() -> int:
                   f"peaks u1 {f['u1_peak']:.1f}, u2 {f['u2_peak']:.1f} in-oz {f['fault']}")
         return 0
     designs = (["open_loop", "inertial_design1", "inertial_design2", "inertial_design2_friction_comp"]
-               if args.all else [args.design])
-    bms = ["BM1", "BM2", "BM3"] if args.all else [args.bm]
+               if args.all else args.design.split(","))
+    bms = (["BM1", "BM2", "BM3"] if args.all and args.bm is None
+           else (args.bm or "BM1").split(","))
     print(f"{'design':34s} {'bm':4s} {'LOS std':>9s} {'LOS hp':>9s} {'AC std':>9s} {'E [J]':>9s} "
           f"{'sat1':>6s} {'sat2':>6s} {'defl':>6s} {'base':>6s}  fault")
     for bm in bms:
         for design in designs:
             f = inertial_run(design, bm, args)
-            print(f"{design:34s} {bm:4s} {f['los_std_urad']:9.2f} {f['los_hp_urad']:9.2f} "
+            print(f"{design:34s} {Path(bm).stem:4s} {f['los_std_urad']:9.2f} {f['los_hp_urad']:9.2f} "
                   f"{f['ac_std_urad']:9.2f} {f['energy_j']:9.3f} {f['sat_coarse']:6.3f} "
                   f"{f['sat_fine']:6.3f} {f['defl_max_mrad']:6.2f} {f['base_rms_mrad']:6.2f}  {f['fault']}",
                   flush=True)

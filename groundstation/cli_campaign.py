@@ -20,6 +20,7 @@ device was made safe, the log closed; the report says how to resume).
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import sys
 import time
 from pathlib import Path
@@ -73,6 +74,9 @@ def add_parsers(sub) -> argparse._SubParsersAction:
                    help="cap every dwell and profile at S seconds (trial runs and tests; "
                         "a base-motion profile keeps its period)")
     s.add_argument("--seed", type=int, default=0, help="simulator seed")
+    s.add_argument("--testbed", default=None, metavar="TESTBED.toml",
+                   help="run on this testbed file in place of the campaign's own (e.g. a variant "
+                        "of the same rig); every step is checked against it before anything runs")
     s.add_argument("--take-over", action="store_true", help="end another host's session")
     s.add_argument("--no-analysis", action="store_true",
                    help="do not score the logs after the run (no metrics, charts or HTML)")
@@ -174,13 +178,31 @@ class _Progress:
             print(head, flush=True)
 
 
+def _on_testbed(campaign, testbed: Path, dictionary):
+    """The campaign on another testbed file, checked against that file's limits as the
+    campaign's own would be (CampaignError listing the problems)."""
+    from .campaign import CampaignError
+    from .campaign.reading import check_campaign
+
+    if not testbed.is_file():
+        raise CampaignError(f"--testbed: no file {testbed}")
+    campaign = dataclasses.replace(campaign, testbed=testbed.resolve())
+    problems = check_campaign(campaign, dictionary)
+    if problems:
+        raise CampaignError(f"{campaign.path.name} on {testbed.name}: " + "; ".join(problems), problems)
+    return campaign
+
+
 def _cmd_run(args) -> int:
     from .campaign import CampaignReport, CampaignRunner, load_campaign
     from .dictionary import load_dictionary
     from .scripting import Testbed
 
     try:
-        c = load_campaign(args.file, load_dictionary(getattr(args, "protocol_dir", None)))
+        dictionary = load_dictionary(getattr(args, "protocol_dir", None))
+        c = load_campaign(args.file, dictionary)
+        if args.testbed:
+            c = _on_testbed(c, Path(args.testbed), dictionary)
         resume = CampaignReport.load(args.resume) if args.resume else None
         if args.publish:                # refused before the rig is touched, not after
             from .fanout.endpoints import check_bind

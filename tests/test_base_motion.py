@@ -127,7 +127,7 @@ def test_the_spectrum_of_the_synthesised_signal_matches_the_table(name):
 
 
 def test_synthesis_refuses_what_the_waveform_cannot_hold():
-    psd = load_psd(BM_DIR / "BM3.csv")
+    psd = load_psd(BM_DIR / "BM3_stage4hz.csv")      # content up to 10 Hz
     with pytest.raises(BaseMotionError, match="shorten the duration to under 819.2 s"):
         synthesise_angle(psd, duration_s=1000.0)
     with pytest.raises(BaseMotionError, match="lengthen the duration"):
@@ -157,7 +157,7 @@ def test_the_held_response_is_the_stage_driven_by_a_staircase():
 
 
 def test_pre_compensation_undoes_the_resonance_and_stays_bounded():
-    psd = load_psd(BM_DIR / "BM2.csv")               # around the 4 Hz resonance
+    psd = load_psd(BM_DIR / "BM2_stage4hz.csv")      # around the 4 Hz resonance
     comp = make_profile(psd, STAGE, duration_s=60.0, seed=0)
     raw = make_profile(psd, STAGE, duration_s=60.0, seed=0, precompensate=False)
     assert np.allclose(comp.expected_angle_rad, comp.target_angle_rad, atol=1e-9 * 2.5e-3)

@@ -39,7 +39,7 @@ def _rms(out: str, which: str) -> float:
 
 @pytest.fixture(scope="module")
 def bm_log(dictionary, tmp_path_factory):
-    """A log of BM2 (10 s period, seed 3) played for 5 s of settling + one period; the
+    """A log of BM2_stage4hz (0.5-8 Hz, the first assumed BM2: 10 s period, seed 3) played for 5 s of settling + one period; the
     output is still on at the log's end (no journal: the window is the log's last period)."""
     folder = tmp_path_factory.mktemp("fg_logs")
     dev = SimulatedDevice(dictionary, pacing="manual", seed=1, testbed=INERTIAL).start()
@@ -53,7 +53,7 @@ def bm_log(dictionary, tmp_path_factory):
     try:
         attach_recorder(client, rec)
         client.connect()
-        profile = load_profile(BM_DIR / "BM2.csv", INERTIAL, duration_s=PERIOD_S, seed=SEED)
+        profile = load_profile(BM_DIR / "BM2_stage4hz.csv", INERTIAL, duration_s=PERIOD_S, seed=SEED)
         with open_generator(server.resource, testbed=INERTIAL) as fg:
             fg.upload_arbitrary(1, profile.volts, name="BM2", frequency_hz=profile.frequency_hz)
             fg.set_output(1, True)
@@ -95,7 +95,7 @@ def test_the_check_helpers_agree_with_the_profile():
 
 def test_a_recorded_profile_passes_and_its_csp_is_written(bm_log, tmp_path, capsys):
     csv = tmp_path / "csp.csv"
-    rc = main(["fg", "check", str(bm_log), "--profile", str(BM_DIR / "BM2.csv"),
+    rc = main(["fg", "check", str(bm_log), "--profile", str(BM_DIR / "BM2_stage4hz.csv"),
                "--duration", str(PERIOD_S), "--seed", str(SEED), "--csv", str(csv)])
     out = capsys.readouterr().out
     assert rc == 0, out
@@ -113,7 +113,7 @@ def test_a_recorded_profile_passes_and_its_csp_is_written(bm_log, tmp_path, caps
 
 
 def test_a_different_target_fails_and_the_tolerance_decides(bm_log, capsys):
-    common = ["fg", "check", str(bm_log), "--profile", str(BM_DIR / "BM2.csv"),
+    common = ["fg", "check", str(bm_log), "--profile", str(BM_DIR / "BM2_stage4hz.csv"),
               "--duration", str(PERIOD_S), "--rms-mrad", "3.0"]
     assert main(common) == 1                                 # 2.5 achieved vs 3.0: -17 %
     out = capsys.readouterr().out
@@ -123,7 +123,7 @@ def test_a_different_target_fails_and_the_tolerance_decides(bm_log, capsys):
 
 
 def test_the_window_can_end_earlier_but_not_before_a_whole_period(bm_log, capsys):
-    base = ["fg", "check", str(bm_log), "--profile", str(BM_DIR / "BM2.csv"),
+    base = ["fg", "check", str(bm_log), "--profile", str(BM_DIR / "BM2_stage4hz.csv"),
             "--duration", str(PERIOD_S)]
     assert main(base + ["--end", "14"]) in (0, 1)            # 4-14 s: a whole period
     assert "window: device time" in capsys.readouterr().out
@@ -134,10 +134,10 @@ def test_the_window_can_end_earlier_but_not_before_a_whole_period(bm_log, capsys
 def test_unusable_logs_and_profiles_exit_2(bm_log, tmp_path, capsys):
     text = tmp_path / "not_a_log.h5"
     text.write_text("hello")
-    assert main(["fg", "check", str(text), "--profile", str(BM_DIR / "BM2.csv")]) == 2
+    assert main(["fg", "check", str(text), "--profile", str(BM_DIR / "BM2_stage4hz.csv")]) == 2
     assert "not an HDF5 file" in capsys.readouterr().err
     assert main(["fg", "check", str(tmp_path / "missing.h5"), "--profile",
-                 str(BM_DIR / "BM2.csv")]) == 2
+                 str(BM_DIR / "BM2_stage4hz.csv")]) == 2
     assert "no such file" in capsys.readouterr().err
     assert main(["fg", "check", str(bm_log), "--profile", str(tmp_path / "nope.csv")]) == 2
     assert "PSD file not found" in capsys.readouterr().err

@@ -9,7 +9,7 @@ before anything starts: the simulator never runs half-configured.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -71,8 +71,15 @@ SCHEMA: dict[str, dict[str, tuple]] = {
                    "actuator_gain": ("float", 0.0, 10.0, "rad/V"),
                    "natural_frequency": ("float", 0.01, 500.0, "Hz"), "damping": ("float", 0.0, 10.0, "")},
     "simulation": {"substeps": ("int", 1, 64, "")},
+    # a repeatable torque ripple along the bearing's travel (reference §9a: "due to bearing
+    # and/or motor irregularities"), additive to the friction torque, a function of the
+    # bearing angle phi1 only; the compensator's model never knows it.  Optional section.
+    "bearing_ripple": {"amplitude": ("float", 0.0, 1e3, "in-oz"),
+                       "period": ("float", 1e-7, 10.0, "rad"),
+                       "phase": ("float", -10.0, 10.0, "rad")},
     "limits": {"fg_max_amplitude": ("float", 0.0, 20.0, "Vpp"), "fg_max_offset": ("float", 0.0, 10.0, "V")},
 }
+NO_RIPPLE = {"amplitude": 0.0, "period": 1.0, "phase": 0.0}
 FRICTION_MODELS = ("SFM", "DHM", "DB-SFM", "DB-DHM", "viscous")
 
 
@@ -97,6 +104,8 @@ class Testbed:
     limits: dict[str, float]
     assumed: tuple[str, ...]
     text: str                     # the file as read (recorded with every log)
+    #: {"amplitude" in-oz, "period" rad, "phase" rad}; amplitude 0 (no section): none
+    bearing_ripple: dict[str, float] = field(default_factory=lambda: dict(NO_RIPPLE))
 
     @property
     def slope_table_path(self) -> Path:
@@ -190,7 +199,9 @@ def load_testbed(path: str | Path | None = None) -> Testbed:
         sensors=_section(doc, "sensors", SCHEMA["sensors"], path), base_stage=base,
         substeps=_section(doc, "simulation", SCHEMA["simulation"], path)["substeps"],
         limits=_section(doc, "limits", SCHEMA["limits"], path),
-        assumed=tuple(assumed), text=text)
+        assumed=tuple(assumed), text=text,
+        bearing_ripple=_section(doc, "bearing_ripple", SCHEMA["bearing_ripple"], path, required=False)
+        or dict(NO_RIPPLE))
     if fric["model"] != "viscous" and not testbed.slope_table_path.is_file():
         raise TestbedConfigError(f"{path}: friction.slope_table '{fric['slope_table']}' not found "
                                  f"(looked for {testbed.slope_table_path})")

@@ -39,7 +39,8 @@ K_ENC_LSB, K_BASE_LSB, K_GYRO_LSB, K_GYRO_RANGE, K_AC_LSB, K_ENC_NOISE, K_AC_NOI
 K_GYRO_SIGMA, K_GYRO_BIAS, K_DELAY, K_COMP_ALPHA, K_INERTIAL, K_TWO_DOF, K_KT1, K_KT2 = 7, 8, 9, 10, 11, 12, 13, 14
 K_R1, K_R2, K_KE1, K_KE2, K_DT, K_SUBSTEPS, K_LOS_IDX, K_FRICTION_MODEL = 15, 16, 17, 18, 19, 20, 21, 22
 K_FLEX_SAFE, K_PEAK1, K_PEAK2 = 23, 24, 25
-K_SIZE = 26
+K_RIPPLE_AMP, K_RIPPLE_WAVENUMBER, K_RIPPLE_PHASE = 26, 27, 28
+K_SIZE = 29
 
 # --- output columns ----------------------------------------------------------------------
 OUT_COLUMNS = ("mode", "armed", "coarse_saturated", "fine_saturated", "profile_active",
@@ -108,6 +109,7 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
     inertial = k[K_INERTIAL] > 0.5
     two_dof = k[K_TWO_DOF] > 0.5
     dt = k[K_DT]
+    ripple_amp, ripple_k, ripple_phase = k[K_RIPPLE_AMP], k[K_RIPPLE_WAVENUMBER], k[K_RIPPLE_PHASE]
     for t in range(n):
         fw[FW_TICK] += 1.0
         tick = fw[FW_TICK]
@@ -259,7 +261,11 @@ def run_ticks(n, x, Ad, Bd, k, fw, fstate, fstack, flut_x, flut_y, fparams,
         u[1] = u2
         u[3] = v_fg[t]
         for _ in range(nsub):
+            # the bearing's torque: its friction plus the repeatable ripple along the
+            # travel (a function of the bearing angle phi1 = theta1 - theta_b only)
             u[2] = fw[FW_T_DAHL]
+            if ripple_amp != 0.0:
+                u[2] += ripple_amp * np.sin(ripple_k * (x[0] - x[4]) + ripple_phase)
             phi_old = x[0] - x[4]
             for r in range(x.shape[0]):
                 acc = 0.0

@@ -62,6 +62,10 @@ class Engine:
         k[core.K_SUBSTEPS] = testbed.substeps
         k[core.K_LOS_IDX] = self.model.los_index
         k[core.K_FLEX_SAFE] = m.get("flexure_safe_deflection", math.inf)
+        ripple = testbed.bearing_ripple
+        k[core.K_RIPPLE_AMP] = ripple["amplitude"]
+        k[core.K_RIPPLE_WAVENUMBER] = 2 * math.pi / ripple["period"]
+        k[core.K_RIPPLE_PHASE] = ripple["phase"]
         self.k = k
         self.gbuf = np.zeros(int(math.ceil(k[core.K_DELAY])) + 4)
         self.gpos = np.zeros(1, dtype=np.int64)
