@@ -12,10 +12,19 @@ import pytest
 from groundstation.analysis import (AnalysisError, JitterAccumulator, highpass_jitter_rms,
                                     integration_period_factor, los_jitter, sensor_valid,
                                     sinusoid_smear_rms, windowed_smear_rms)
-from groundstation.analysis.jitter import error_table, highpass, window_variance_sum
+from groundstation.analysis.jitter import (BRIDGE_MAX_PERIODS, SETTLING_TIME_CONSTANTS, error_table,
+                                           highpass, window_variance_sum)
 from groundstation.dictionary import default_control_rate_hz
 
 RATE_HZ = default_control_rate_hz()
+#: high-pass outputs discarded after each (re)start of the filter, dT_i = 1 s
+SETTLE = int(math.ceil(SETTLING_TIME_CONSTANTS * RATE_HZ))
+
+
+def settled_hp2(x: np.ndarray) -> tuple[float, int]:
+    """(sum of squares, count) of the high-pass of one stretch after its settling."""
+    y = highpass(x, RATE_HZ)[SETTLE:]
+    return float(np.dot(y, y)), len(y)
 
 
 def sinusoid(f_hz: float, seconds: float, amplitude: float = 1.0, phase: float = 0.3,
@@ -121,14 +130,18 @@ def test_mean_rms_and_standard_deviation():
     assert j.rms_rad == pytest.approx(math.sqrt(25e-12 + 8e-12), rel=1e-6)
     assert (j.samples_used, j.samples_excluded, j.segments) == (len(x), 0, 1)
     assert j.smear_rms_rad == pytest.approx(windowed_smear_rms(x, RATE_HZ, 1.0))
-    assert j.highpass_rms_rad == pytest.approx(highpass_jitter_rms(x, RATE_HZ, 1.0))
+    # the filter's first SETTLING_TIME_CONSTANTS x dT_i are its start, not motion
+    hp2, used = settled_hp2(x)
+    assert (j.highpass_samples_used, j.highpass_samples_settling) == (used, SETTLE)
+    assert j.highpass_rms_rad == pytest.approx(math.sqrt(hp2 / used), rel=1e-12)
+    assert j.highpass_rms_rad == pytest.approx(highpass_jitter_rms(x, RATE_HZ, 1.0), rel=0.01)
     assert "urad" in j.text() and "autocollimator" in j.text()
 
 
 def test_out_of_range_samples_are_excluded_counted_and_split_the_filter():
     range_rad = 0.33 * math.pi / 180
-    a = sinusoid(7.0, 3.0, amplitude=1e-5, offset=1e-4)
-    b = sinusoid(9.0, 4.0, amplitude=2e-5, offset=-2e-4)
+    a = sinusoid(7.0, 4.0, amplitude=1e-5, offset=1e-4)
+    b = sinusoid(9.0, 5.0, amplitude=2e-5, offset=-2e-4)
     rail = np.full(100, range_rad)               # the sensor pinned at its range
     x = np.concatenate([a, rail, b])
     counts = np.concatenate([np.zeros(len(a), np.int16), np.full(100, 32767, np.int16),
@@ -140,9 +153,11 @@ def test_out_of_range_samples_are_excluded_counted_and_split_the_filter():
     both = np.concatenate([a, b])
     assert j.mean_rad == pytest.approx(both.mean(), rel=1e-12)
     assert j.std_rad == pytest.approx(both.std(), rel=1e-12)
-    # the filter restarts from steady state on each stretch: the step between them is not jitter
-    hp2 = sum(float(np.sum(highpass(s, RATE_HZ) ** 2)) for s in (a, b))
-    assert j.highpass_rms_rad == pytest.approx(math.sqrt(hp2 / len(both)), rel=1e-12)
+    # the hole is longer than the bridge: the filter restarts from steady state on each
+    # stretch (the step between them is not jitter) and settles again
+    (sa2, na), (sb2, nb) = settled_hp2(a), settled_hp2(b)
+    assert j.highpass_restarts == 2 and j.highpass_samples_used == na + nb
+    assert j.highpass_rms_rad == pytest.approx(math.sqrt((sa2 + sb2) / (na + nb)), rel=1e-12)
     joined = los_jitter(both, RATE_HZ)
     assert joined.highpass_rms_rad > 2 * j.highpass_rms_rad
     # windows never straddle the hole
@@ -159,13 +174,15 @@ def test_the_rail_alone_and_non_finite_samples_are_excluded():
 
 
 def test_a_gap_splits_the_segments():
-    x = sinusoid(4.0, 5.0, amplitude=1e-6)
+    x = sinusoid(4.0, 10.0, amplitude=1e-6)
     gap = np.zeros(len(x), dtype=bool)
-    gap[2500] = True
+    gap[5000] = True
     j = los_jitter(x, RATE_HZ, gap_before=gap, missing_frames=3)
     assert j.segments == 2 and j.missing_frames == 3 and "3 frames missing" in j.text()
-    hp2 = sum(float(np.sum(highpass(s, RATE_HZ) ** 2)) for s in (x[:2500], x[2500:]))
-    assert j.highpass_rms_rad == pytest.approx(math.sqrt(hp2 / len(x)), rel=1e-12)
+    # a gap of unknown length (no missing_before) restarts the filter
+    (s1, n1), (s2, n2) = settled_hp2(x[:5000]), settled_hp2(x[5000:])
+    assert j.highpass_restarts == 2
+    assert j.highpass_rms_rad == pytest.approx(math.sqrt((s1 + s2) / (n1 + n2)), rel=1e-12)
 
 
 def test_a_stretch_shorter_than_the_integration_period_has_no_windowed_figure():
@@ -196,6 +213,90 @@ def test_the_accumulator_in_pieces_equals_the_whole(chunk):
         (whole.samples_used, whole.samples_excluded, whole.segments) == (n - 34, 34, 4)
     for name in ("mean_rad", "rms_rad", "std_rad", "highpass_rms_rad", "smear_rms_rad"):
         assert getattr(part, name) == pytest.approx(getattr(whole, name), rel=1e-9), name
+
+
+@pytest.mark.parametrize("chunk", [1, 5, 1199, 4096, 100_000])
+def test_the_accumulator_in_pieces_bridges_as_the_whole(chunk):
+    """Short holes bridged across piece boundaries, long ones restarting, settling
+    carried: the pieces give the whole's high-pass sums."""
+    rng = np.random.default_rng(12)
+    n = 14_000
+    x = 1e-3 + np.cumsum(rng.standard_normal(n)) * 1e-8 + sinusoid(2.1, n / RATE_HZ, 3e-6)
+    ok = np.ones(n, dtype=bool)
+    ok[2000:2004] = False                        # short: bridged
+    ok[6000:6100] = False                        # long: a restart
+    ok[9000] = False
+    missing = np.zeros(n, dtype=np.int64)
+    missing[[3000, 9001, 12_000]] = [2, 3, 11]   # short gaps, 9001 right after an exclusion
+    missing[7000] = -1                           # a stalled frame: always a restart
+    gap = missing != 0
+    x[~ok] = 1.0
+    whole = los_jitter(x, RATE_HZ, valid=ok, gap_before=gap, missing_before=missing)
+    assert whole.highpass_restarts == 3          # the start, after 6000:6100, at 7000
+    acc = JitterAccumulator(RATE_HZ, 1.0)
+    for a in range(0, n, chunk):
+        acc.feed(x[a:a + chunk], ok[a:a + chunk], gap[a:a + chunk], missing[a:a + chunk])
+    part = acc.result()
+    for name in ("highpass_samples_used", "highpass_samples_settling", "highpass_restarts",
+                 "segments", "samples_used"):
+        assert getattr(part, name) == getattr(whole, name), name
+    assert part.highpass_rms_rad == pytest.approx(whole.highpass_rms_rad, rel=1e-9)
+
+
+def _gapped_sinusoid(amplitude: float, f_hz: float):
+    """A sinusoid of 120 s with two long excluded stretches (the sensor off its range,
+    20 s and 15 s, reading its rail) and 1-4 frames missing every 0.7 s: the kept
+    samples, whether each is usable, and the frames missing before each."""
+    n = int(120 * RATE_HZ)
+    x = sinusoid(f_hz, 120.0, amplitude)
+    ok = np.ones(n, dtype=bool)
+    for a, b in [(30, 50), (80, 95)]:
+        ok[int(a * RATE_HZ):int(b * RATE_HZ)] = False
+    x[~ok] = 5.76e-3                             # at the rail: nothing to do with the sinusoid
+    keep = np.ones(n, dtype=bool)
+    lost = np.random.default_rng(1).integers(1, 5, n)
+    for i in range(int(0.35 * RATE_HZ), n, int(0.7 * RATE_HZ)):
+        keep[i:i + lost[i]] = False
+    idx = np.flatnonzero(keep)
+    missing = idx - np.concatenate([[-1], idx[:-1]]) - 1
+    return x[keep], ok[keep], missing
+
+
+@pytest.mark.parametrize("f_hz", [0.5, 2.0, 7.0])
+def test_the_highpass_of_a_gapped_sinusoid_is_its_gain_times_its_rms(f_hz):
+    """The known answer: |H(j w)| A / sqrt 2, through long exclusions and short frame
+    gaps (the restart at each short gap cost 8 % at 0.5 Hz before the bridge)."""
+    amplitude = 1e-4
+    x, ok, missing = _gapped_sinusoid(amplitude, f_hz)
+    j = los_jitter(x, RATE_HZ, valid=ok, gap_before=missing > 0, missing_before=missing)
+    w = 2 * math.pi * f_hz
+    expected = w / math.hypot(w, 1.0) * amplitude / math.sqrt(2)
+    assert j.highpass_rms_rad == pytest.approx(expected, rel=2e-3)
+    assert j.highpass_rms_rad <= j.std_rad
+    # three starts (the window's, after each exclusion), each settling for 3 dT_i of
+    # device time (the frames missing in it are not samples)
+    assert j.highpass_restarts == 3
+    assert 0.99 * 3 * SETTLE < j.highpass_samples_settling <= 3 * SETTLE
+    assert j.highpass_samples_used + j.highpass_samples_settling == j.samples_used
+
+
+def test_stretches_shorter_than_the_settling_give_no_highpass_figure():
+    """An open-loop log: the base motion drags the LOS across the sensor's range, no
+    stretch outlasts the settling, so no high-pass figure - where restarting on the rail
+    gave one above the standard deviation (2.3 against 1.8 mrad here)."""
+    t = np.arange(int(120 * RATE_HZ)) / RATE_HZ
+    x = 4e-3 * np.sin(2 * np.pi * 0.3 * t) + 2e-3 * np.sin(2 * np.pi * 0.11 * t + 1)
+    ok = sensor_valid(x, range_rad=3e-3)
+    x = np.where(ok, x, np.sign(x) * 3e-3)
+    j = los_jitter(x, RATE_HZ, valid=ok)
+    assert j.highpass_samples_used == 0 and math.isnan(j.highpass_rms_rad)
+    assert j.highpass_samples_settling == j.samples_used
+    assert "high-pass 1 s n/a" in j.text()
+
+
+def test_the_bridge_is_short_against_the_integration_period():
+    assert BRIDGE_MAX_PERIODS * RATE_HZ >= 4        # a few frames at dT_i = 1 s
+    assert BRIDGE_MAX_PERIODS <= 0.01               # the hold errs by <= 1 % of the change
 
 
 # ---------------------------------------------------------------------- bad input

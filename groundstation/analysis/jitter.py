@@ -17,8 +17,12 @@ Definitions (the testbed reference; docs/analysis.md has the derivations):
 
 Samples the scoring sensor could not measure (out of its range, at the A/D rail, not
 finite) are excluded and counted, never used: the statistics take the usable samples,
-and the filter and the windows run per contiguous stretch of them (a stretch also ends
-where telemetry frames are missing), each filter restarting from steady state.
+and the windows run per contiguous stretch of them (a stretch also ends where telemetry
+frames are missing).  The high-pass filter bridges holes of at most BRIDGE_MAX_PERIODS
+of dT_i (input held), restarts from steady state after longer ones, and its first
+SETTLING_TIME_CONSTANTS x dT_i after each (re)start are counted apart, not in its RMS
+(highpass_sums.py says why: a restart's transient is not motion, and on clipped logs it
+made the high-pass RMS exceed the standard deviation).
 
 `los_jitter` works on arrays in memory; `JitterAccumulator` gives the same result for a
 signal fed in pieces (a log read in chunks), carrying the filter state, the last window
@@ -34,9 +38,19 @@ import numpy as np
 from scipy import signal
 
 from . import AnalysisError
+from .highpass_sums import HighpassSums
 from .spectra import runs
 
 DEFAULT_INTEGRATION_PERIOD_S = 1.0
+#: the high-pass filter runs on through a hole (missing frames and excluded samples
+#: together) of at most this fraction of dT_i, its input held: its low-pass state moves at
+#: the rate 1/dT_i, so a hold over 1 % of dT_i errs by at most 1 % of the signal's change
+#: over the hole (12 frames at 1200 Hz and dT_i = 1 s)
+BRIDGE_MAX_PERIODS = 0.01
+#: after a (re)start the filter's first SETTLING_TIME_CONSTANTS x dT_i of output are not
+#: counted: the start's error in the low-pass state decays as exp(-t/dT_i), so 3 time
+#: constants leave 5 % of it in amplitude, 0.25 % in power
+SETTLING_TIME_CONSTANTS = 3.0
 #: an angle within this fraction of the calibrated range counts as at the range: the
 #: A/D's full-scale count times its scale is the range only up to rounding
 RANGE_TOLERANCE = 1e-9
@@ -234,6 +248,9 @@ class JitterResult:
     segments: int                     # contiguous stretches of usable samples
     missing_frames: int = 0           # telemetry frames lost inside the window
     exclusion_rule: str = ""          # what made a sample unusable, for the reader
+    highpass_samples_used: int = 0    # settled high-pass outputs in highpass_rms_rad
+    highpass_samples_settling: int = 0  # outputs discarded while the filter settled
+    highpass_restarts: int = 0        # filter (re)starts: the first, then after long holes
 
     def text(self) -> str:
         """One line for the CLI, in urad."""
@@ -241,23 +258,53 @@ class JitterResult:
             return "n/a" if not math.isfinite(v) else f"{v * 1e6:.3f}"
         t = self.integration_period_s
         s = (f"{self.sensor or 'angle'}: RMS {u(self.rms_rad)} urad (mean {u(self.mean_rad)}, std "
-             f"{u(self.std_rad)}), high-pass {t:g} s {u(self.highpass_rms_rad)} urad, windowed "
-             f"{t:g} s {u(self.smear_rms_rad)} urad; {self.samples_used} samples used in "
-             f"{self.segments} segment(s), {self.samples_excluded} excluded")
+             f"{u(self.std_rad)}), high-pass {t:g} s {u(self.highpass_rms_rad)} urad "
+             f"({self.highpass_samples_used} settled samples, {self.highpass_samples_settling} "
+             f"settling), windowed {t:g} s {u(self.smear_rms_rad)} urad; {self.samples_used} "
+             f"samples used in {self.segments} segment(s), {self.samples_excluded} excluded")
         if self.missing_frames:
             s += f", {self.missing_frames} frames missing"
         return s
 
 
+def highpass_sums(rate_hz: float, integration_period_s: float = DEFAULT_INTEGRATION_PERIOD_S
+                  ) -> HighpassSums:
+    """The high-pass sums with this module's bridge and settling (BRIDGE_MAX_PERIODS,
+    SETTLING_TIME_CONSTANTS) for `rate_hz` and dT_i."""
+    b, a = highpass_coefficients(rate_hz, integration_period_s)
+    return HighpassSums(b, a, bridge_samples=int(math.floor(BRIDGE_MAX_PERIODS * integration_period_s
+                                                            * rate_hz)),
+                        settle_samples=int(math.ceil(SETTLING_TIME_CONSTANTS * integration_period_s
+                                                     * rate_hz)))
+
+
+def _missing(n: int, gap_before, missing_before) -> np.ndarray | None:
+    """Frames missing before each sample for HighpassSums: `missing_before` where given
+    (0 where gap_before marks a hole of unknown length: made -1, a hard break), else -1
+    wherever gap_before is set."""
+    if missing_before is not None:
+        m = np.asarray(missing_before, dtype=np.int64)
+        if m.shape != (n,):
+            raise AnalysisError(f"missing_before must have one entry per sample ({n})")
+        if gap_before is not None:
+            m = np.where(np.asarray(gap_before, dtype=bool) & (m == 0), -1, m)
+        return m
+    if gap_before is None:
+        return None
+    return np.where(np.asarray(gap_before, dtype=bool), -1, 0)
+
+
 def los_jitter(angle_rad, rate_hz: float, *,
                integration_period_s: float = DEFAULT_INTEGRATION_PERIOD_S,
-               valid=None, gap_before=None, sensor: str = "", missing_frames: int = 0,
-               exclusion_rule: str = "") -> JitterResult:
+               valid=None, gap_before=None, missing_before=None, sensor: str = "",
+               missing_frames: int = 0, exclusion_rule: str = "") -> JitterResult:
     """Jitter figures of an angle series in memory.
 
     `valid` (bool per sample, e.g. from `sensor_valid`) excludes samples; non-finite
     ones are excluded anyway.  `gap_before` (bool per sample) marks where frames are
-    missing before a sample: the filter and the windows restart there."""
+    missing before a sample: the windows restart there.  `missing_before` (int per
+    sample: how many frames are missing before it; -1 unknown) lets the high-pass
+    bridge a short hole; without it every gap restarts the filter."""
     x = np.asarray(angle_rad, dtype=float)
     if x.ndim != 1 or len(x) == 0:
         raise AnalysisError(f"no {sensor or 'angle'} samples in the window")
@@ -268,23 +315,28 @@ def los_jitter(angle_rad, rate_hz: float, *,
         raise AnalysisError(f"all {len(x)} {sensor or 'angle'} samples of the window are excluded"
                             f"{' (' + exclusion_rule + ')' if exclusion_rule else ''}: choose "
                             f"another window or sensor")
-    b, a = highpass_coefficients(rate_hz, integration_period_s)
-    zi = signal.lfilter_zi(b, a)
+    hp = highpass_sums(rate_hz, integration_period_s)
+    hp.feed(x, ok, _missing(len(x), gap_before, missing_before))
     n_win = window_samples(rate_hz, integration_period_s)
-    hp2, var_sum, windows = 0.0, 0.0, 0
+    var_sum, windows = 0.0, 0
     for i0, i1 in segs:
-        y, _ = signal.lfilter(b, a, x[i0:i1], zi=zi * x[i0])
-        hp2 += float(np.dot(y, y))
         s, c = window_variance_sum(x[i0:i1], n_win)
         var_sum += s
         windows += c
     return JitterResult(
         sensor=sensor, mean_rad=float(np.mean(used)), rms_rad=math.sqrt(float(np.mean(used * used))),
-        std_rad=float(np.std(used)), highpass_rms_rad=math.sqrt(hp2 / len(used)),
+        std_rad=float(np.std(used)), highpass_rms_rad=_highpass_rms(hp),
         smear_rms_rad=math.sqrt(var_sum / windows) if windows else math.nan,
         integration_period_s=float(integration_period_s), samples_used=int(len(used)),
         samples_excluded=int(len(x) - len(used)), segments=len(segs),
-        missing_frames=int(missing_frames), exclusion_rule=exclusion_rule)
+        missing_frames=int(missing_frames), exclusion_rule=exclusion_rule,
+        highpass_samples_used=hp.used, highpass_samples_settling=hp.settling,
+        highpass_restarts=hp.restarts)
+
+
+def _highpass_rms(hp: HighpassSums) -> float:
+    """RMS over the settled outputs; nan when no stretch outlasted the settling."""
+    return math.sqrt(hp.sum_squares / hp.used) if hp.used else math.nan
 
 
 class JitterAccumulator:
@@ -294,8 +346,7 @@ class JitterAccumulator:
     def __init__(self, rate_hz: float, integration_period_s: float = DEFAULT_INTEGRATION_PERIOD_S):
         self.rate_hz = float(rate_hz)
         self.integration_period_s = float(integration_period_s)
-        self._b, self._a = highpass_coefficients(rate_hz, integration_period_s)
-        self._zi = signal.lfilter_zi(self._b, self._a)
+        self._hp = highpass_sums(rate_hz, integration_period_s)
         self._n_win = window_samples(rate_hz, integration_period_s)
         # running sums of (x - shift): the first usable sample as shift keeps the
         # variance from cancelling against a large mean
@@ -305,7 +356,6 @@ class JitterAccumulator:
         self.segments = 0
         self._s1 = 0.0
         self._s2 = 0.0
-        self._hp2 = 0.0
         self._var_sum = 0.0
         self._windows = 0
         #: the smallest and largest usable sample: equal means the sensor never moved
@@ -313,15 +363,17 @@ class JitterAccumulator:
         self.lowest = math.inf
         self.highest = -math.inf
         self._open = False                 # the last sample fed is part of a stretch still open
-        self._zf: np.ndarray | None = None  # the open stretch's filter state
         self._tail = np.zeros(0)           # its last n_win - 1 samples (windows across pieces)
 
-    def feed(self, angle_rad, valid=None, gap_before=None) -> None:
+    def feed(self, angle_rad, valid=None, gap_before=None, missing_before=None) -> None:
+        """The next piece, as los_jitter takes the whole (`missing_before`: frames missing
+        before each sample, for the high-pass's bridge)."""
         x = np.asarray(angle_rad, dtype=float)
         n = len(x)
         if not n:
             return
         ok = np.isfinite(x) if valid is None else np.asarray(valid, dtype=bool) & np.isfinite(x)
+        self._hp.feed(x, ok, _missing(n, gap_before, missing_before))
         used = x if ok.all() else x[ok]          # no copy in the usual case
         self.excluded += n - len(used)
         if len(used):
@@ -339,9 +391,6 @@ class JitterAccumulator:
             continues = i0 == 0 and self._open and not first_gap
             if not continues:
                 self.segments += 1
-            zi = self._zf if continues else self._zi * seg[0]
-            y, self._zf = signal.lfilter(self._b, self._a, seg, zi=zi)
-            self._hp2 += float(np.dot(y, y))
             buf = np.concatenate([self._tail, seg]) if continues else seg
             s, c = window_variance_sum(buf, self._n_win)
             self._var_sum += s
@@ -349,7 +398,7 @@ class JitterAccumulator:
             self._tail = buf[len(buf) - (self._n_win - 1):].copy() if len(buf) >= self._n_win else buf.copy()
         self._open = bool(ok[-1])
         if not self._open:
-            self._zf, self._tail = None, np.zeros(0)
+            self._tail = np.zeros(0)
 
     def result(self, sensor: str = "", *, missing_frames: int = 0, exclusion_rule: str = "") -> JitterResult:
         if not self.n:
@@ -363,11 +412,13 @@ class JitterAccumulator:
         mean = self._shift + m1
         return JitterResult(
             sensor=sensor, mean_rad=mean, rms_rad=math.sqrt(var + mean * mean), std_rad=math.sqrt(var),
-            highpass_rms_rad=math.sqrt(self._hp2 / self.n),
+            highpass_rms_rad=_highpass_rms(self._hp),
             smear_rms_rad=math.sqrt(self._var_sum / self._windows) if self._windows else math.nan,
             integration_period_s=self.integration_period_s, samples_used=self.n,
             samples_excluded=self.excluded, segments=self.segments,
-            missing_frames=int(missing_frames), exclusion_rule=exclusion_rule)
+            missing_frames=int(missing_frames), exclusion_rule=exclusion_rule,
+            highpass_samples_used=self._hp.used, highpass_samples_settling=self._hp.settling,
+            highpass_restarts=self._hp.restarts)
 
 
 def error_table(frequencies_hz, rate_hz: float, *,
@@ -392,7 +443,8 @@ def error_table(frequencies_hz, rate_hz: float, *,
     return rows
 
 
-__all__ = ["DEFAULT_INTEGRATION_PERIOD_S", "JitterAccumulator", "JitterResult", "error_table",
+__all__ = ["BRIDGE_MAX_PERIODS", "DEFAULT_INTEGRATION_PERIOD_S", "JitterAccumulator",
+           "SETTLING_TIME_CONSTANTS", "highpass_sums", "JitterResult", "error_table",
            "highpass", "highpass_coefficients", "highpass_jitter_rms", "integration_period_factor",
            "los_jitter", "sensor_valid", "sinusoid_smear_rms", "window_samples",
            "window_variance_sum", "windowed_smear_rms"]
