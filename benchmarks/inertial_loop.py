@@ -22,79 +22,25 @@ import copy
 import dataclasses
 import math
 import sys
-import warnings
 from pathlib import Path
-
-import numpy as np
-from scipy.interpolate import pade
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
+from groundstation.params.continuous_loop import continuous_loop, with_scaled_notch  # noqa: E402
 from groundstation.params.design_file import load_design  # noqa: E402
 from groundstation.params.loop import validate  # noqa: E402
-from groundstation.plant.model import plant_transfer_functions  # noqa: E402
-from groundstation.params.tf_algebra import TransferFunction  # noqa: E402
 
 DESIGNS = ["inertial_design1", "inertial_design2"]
-PADE_ORDER = 8            # a 2.6 ms delay to within 0.1 deg well past 100 Hz
-
-
-def _poly(tf: TransferFunction) -> tuple[np.ndarray, np.ndarray]:
-    return (tf.gain * np.real(np.poly(tf.zeros)) if len(tf.zeros) else np.array([tf.gain]),
-            np.real(np.poly(tf.poles)) if len(tf.poles) else np.array([1.0]))
-
-
-def _mul(*ps: np.ndarray) -> np.ndarray:
-    out = np.array([1.0])
-    for p in ps:
-        out = np.polymul(out, p)
-    return out
-
-
-def _delay(seconds: float) -> tuple[np.ndarray, np.ndarray]:
-    if seconds <= 0:
-        return np.array([1.0]), np.array([1.0])
-    taylor = [(-seconds) ** i / math.factorial(i) for i in range(2 * PADE_ORDER + 1)]
-    with warnings.catch_warnings():          # the Taylor system is ill-conditioned, the result is fine
-        warnings.simplefilter("ignore")
-        num, den = pade(taylor, PADE_ORDER)
-    return np.asarray(num.coeffs), np.asarray(den.coeffs)
 
 
 def continuous_pole(design, testbed, *, notch_scale: float = 1.0, crossover_hz: float = 2.0) -> complex:
-    """Least-damped closed-loop pole of the continuous loop (rad/s).
-
-    Closed loop: 1 + c0 (c1 g1 + c2 g2) (K_p H_est + s G e^{-sT}) = 0, where the LOS
-    estimate H_est = F_lp + F_hp G e^{-sT} blends the angle (below the crossover) with
-    the integrated gyro (above)."""
-    (g1n, gd), (g2n, _) = plant_transfer_functions(testbed)
-    cas = design.cascades
-    c0 = cas["c0"]
-    if notch_scale != 1.0:                   # move c0's lightly damped zero pair in frequency
-        z = np.array(c0.zeros, dtype=complex)
-        light = np.abs(z.real) < 0.2 * np.abs(z)
-        z[light] *= math.sqrt(notch_scale)
-        c0 = dataclasses.replace(c0, zeros=z)
-    c0n, c0d = _poly(c0)
-    c1n, c1d = _poly(cas["c1"])
-    c2n, c2d = _poly(cas["c2"])
-    # c0 (c1 g1 + c2 g2) = c0n (c1n c2d g1n + c2n c1d g2n) / (c0d c1d c2d gd)
-    Ln = _mul(c0n, np.polyadd(_mul(c1n, c2d, g1n), _mul(c2n, c1d, g2n)))
-    Ld = _mul(c0d, c1d, c2d, gd)
-    s = testbed.sensors
-    wg = 2 * math.pi * s["gyro_bandwidth"]
-    Gn, Gd = np.array([wg ** 2]), np.array([1.0, 2 * s["gyro_damping"] * wg, wg ** 2])
-    dn, dd = _delay(s["gyro_delay"])
-    kp = design.outer_loop_gain_per_s
-    wc = 2 * math.pi * crossover_hz
-    # sensor path over the common denominator (s + wc) Gd dd
-    Sn = np.polyadd(np.polyadd(kp * wc * _mul(Gd, dd), kp * _mul([1.0, 0.0], Gn, dn)),
-                    _mul([1.0, 0.0], [1.0, wc], Gn, dn))
-    Sd = _mul([1.0, wc], Gd, dd)
-    roots = np.roots(np.polyadd(_mul(Ld, Sd), _mul(Ln, Sn)))
-    roots = roots[np.abs(roots) > 1e-6]       # integrator cancellations at the origin
-    return complex(roots[np.argmax(roots.real)])
+    """Least-damped closed-loop pole of the continuous loop (rad/s), with the testbed's
+    own gyro delay (groundstation/params/continuous_loop.py builds the loop)."""
+    c0 = with_scaled_notch(design.c0, notch_scale) if notch_scale != 1.0 else None
+    loop = continuous_loop(design, testbed, gyro_delay_s=testbed.sensors["gyro_delay"],
+                           crossover_hz=crossover_hz, c0=c0)
+    return loop.least_damped_pole()
 
 
 def sampled_radius(design, testbed, prewarp: str | float | None = "keep") -> float:
