@@ -50,19 +50,31 @@ def sampled_radius(design, testbed, prewarp: str | float | None = "keep") -> flo
     return validate(dataclasses.replace(design, **kw)).max_pole_radius
 
 
-def _variants(tb):
-    """(label, testbed, notch_scale): the nominal loop, then one printed number at a time
-    moved by half its last digit (and the gyro delay read as including the hold)."""
+REFERENCE_GYRO_DELAY_S = 0.0026          # T_d as the reference prints it (section 2)
+APPENDIX_INERTIAS = {"J1": 2.7206, "J2": 1.7878}   # in-oz-s^2, the appendix's mass properties
+
+
+def _variants(design_testbed):
+    """(label, testbed, notch_scale): the loop as the reference prints it (its T_d of
+    2.6 ms, not the twin's T_d - T/2 of the testbed file), then one printed number at a
+    time moved by half its last digit, the appendix's inertias, and the gyro delay read as
+    including the hold (the twin's choice, H4)."""
+    tb = copy.deepcopy(design_testbed)
+    tb.sensors["gyro_delay"] = REFERENCE_GYRO_DELAY_S
+
     def changed(section: str, key: str, value: float):
         t = copy.deepcopy(tb)
         getattr(t, section)[key] = value
         return t
     m = tb.mechanics
-    yield "as the reference gives it", tb, 1.0
+    yield "as the reference gives it (T_d 2.6 ms)", tb, 1.0
     for key, half in [("J1", 0.005), ("J2", 0.005), ("flexure_stiffness", 5.0),
                       ("flexure_damping", 0.005), ("bearing_viscous", 0.5)]:
         for sign in (-1, 1):
             yield f"{key} {m[key] + sign * half:g}", changed("mechanics", key, m[key] + sign * half), 1.0
+    appendix = copy.deepcopy(tb)
+    appendix.mechanics.update(APPENDIX_INERTIAS)
+    yield "appendix inertias J1 2.7206, J2 1.7878", appendix, 1.0
     for scale in (1.955e4 / 1.96e4, 1.965e4 / 1.96e4):
         yield f"c0 notch 1.96e4 read as {1.96e4 * scale:.4g}", tb, scale
     d = tb.sensors["gyro_delay"]
