@@ -49,7 +49,8 @@ say why); 2 bad arguments."""
 
 #: (header, row key, format) of the text table, per metric
 _COMMON = [("log", "log", "{}"), ("window s", "window", "{}"), ("frames", "frames", "{:d}"),
-           ("missing", "missing_frames", "{:d}")]
+           ("missing", "missing_frames", "{:d}"), ("excl %", "excluded_pct", "{:.2f}"),
+           ("valid", "valid", "{}")]
 _COLUMNS = {
     "jitter": [("used", "samples_used", "{:d}"), ("excl", "samples_excluded", "{:d}"),
                ("seg", "segments", "{:d}"), ("mean urad", "mean_urad", "{:.3f}"),
@@ -94,6 +95,16 @@ def _positive(text: str) -> float:
     return value
 
 
+def _fraction(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not 0 <= value <= 1:
+        raise argparse.ArgumentTypeError(f"must be a fraction from 0 to 1, not {text}")
+    return value
+
+
 def _seconds(text: str) -> float:
     try:
         value = float(text)
@@ -124,6 +135,14 @@ def add_parsers(sub) -> None:
     s.add_argument("--integration-period", type=_positive, default=1.0, metavar="S",
                    help="sensor integration period T for the high-pass and windowed figures "
                         "(default 1 s)")
+    s.add_argument("--max-excluded-fraction", type=_fraction, default=None, metavar="F",
+                   help="a window with more than this fraction excluded (sensor out of range "
+                        "or at its rail, frames missing) is marked not valid (default 0.01)")
+    s.add_argument("--design", default="auto", metavar="auto|none|FILE",
+                   help="the mode check: the share of the jitter in the band of the loop's "
+                        "lightly damped mode, from the design the log records uploading (auto, "
+                        "the default; only when the window ran in its closed-loop mode), from "
+                        "FILE, or none")
     s.add_argument("--psd-segment", type=_positive, default=10.0, metavar="S",
                    help="Welch segment length (default 10 s: 0.1 Hz resolution)")
     s.add_argument("--testbed", default=None, metavar="FILE",
@@ -223,7 +242,8 @@ def _cmd_analyze(args) -> int:
             try:
                 m = analyze_log(name, metrics=metrics, start_s=args.start, stop_s=args.stop,
                                 sensor=args.sensor, integration_period_s=args.integration_period,
-                                testbed=testbed, psd_segment_s=args.psd_segment)
+                                testbed=testbed, psd_segment_s=args.psd_segment,
+                                design=None if args.design == "none" else args.design)
             except GroundStationError as exc:
                 error = str(exc)
         results.append((name, m, error))
@@ -231,7 +251,8 @@ def _cmd_analyze(args) -> int:
         extra_results.append({} if error else _extras(name, extras, args, testbed))
     if args.slope_table:
         _write_slope_tables(Path(args.slope_table), args.logs, extra_results)
-    rows = [_row(name, m, error, ex) for (name, m, error), ex in zip(results, extra_results)]
+    rows = [_row(name, m, error, ex, args.max_excluded_fraction)
+            for (name, m, error), ex in zip(results, extra_results)]
     if args.json or args.csv:
         from .analysis.batch_rows import ROW_KEYS
         _print_rows(rows, ROW_KEYS, args.json)
@@ -281,7 +302,11 @@ def _cmd_batch(args) -> int:
                            sensor=args.sensor, integration_period_s=args.integration_period,
                            psd_segment_s=args.psd_segment,
                            testbed=str(Path(args.testbed).absolute()) if args.testbed else None,
-                           frf_input=args.frf_input, frf_output=args.frf_output)
+                           frf_input=args.frf_input, frf_output=args.frf_output,
+                           design=None if args.design == "none" else
+                           args.design if args.design == "auto" else str(Path(args.design).absolute()),
+                           **({} if args.max_excluded_fraction is None else
+                              {"max_excluded_fraction": args.max_excluded_fraction}))
     known = campaign_index(paths)
     progress = _ProgressBar(len(paths))
     if scheduler == "none":
@@ -374,10 +399,12 @@ def _write_slope_tables(out: Path, logs: list[str], extra_results: list[dict]) -
             ex["hysteresis"] = f"slope table not written: {exc}"
 
 
-def _row(name: str, m, error: str, ex: dict) -> dict:
+def _row(name: str, m, error: str, ex: dict, max_excluded_fraction: float | None = None) -> dict:
     from .analysis.batch_rows import log_row
+    from .analysis.validity import MAX_EXCLUDED_FRACTION
 
-    return log_row(name, m, error, ex, MIN_COHERENCE)
+    return log_row(name, m, error, ex, MIN_COHERENCE,
+                   MAX_EXCLUDED_FRACTION if max_excluded_fraction is None else max_excluded_fraction)
 
 
 def _ms(v) -> str:
@@ -454,7 +481,10 @@ def _print_table(rows: list[dict], metrics: tuple[str, ...], results) -> None:
             continue
         cells = []
         for _, key, fmt in cols:
-            v = f"{row['from_s']:.3f}-{row['to_s']:.3f}" if key == "window" else row[key]
+            v = (f"{row['from_s']:.3f}-{row['to_s']:.3f}" if key == "window" else
+                 None if key == "excluded_pct" and row["excluded_fraction"] is None else
+                 100.0 * row["excluded_fraction"] if key == "excluded_pct" else
+                 ("yes" if row[key] else "NO") if key == "valid" else row[key])
             cells.append("n/a" if v is None else fmt.format(v))
         table.append(cells)
     widths = [max(len(r[i]) for r in table) for i in range(len(cols))]
@@ -471,6 +501,10 @@ def _print_table(rows: list[dict], metrics: tuple[str, ...], results) -> None:
             if j.samples_excluded:
                 what += f"; {j.samples_excluded} samples excluded ({j.exclusion_rule})"
             print(f"{row['log']}: {what}")
+        if not row["valid"]:
+            print(f"{row['log']}: NOT VALID: {row['invalid_reason']}")
+        if m.mode is not None:
+            print(f"{row['log']}: mode check ({m.mode.source}): {m.mode.text()}")
         if m.energy is not None:
             print(f"{row['log']}: resistances {m.energy.resistance_coarse_ohm:g} / "
                   f"{m.energy.resistance_fine_ohm:g} ohm from {m.testbed_source}")

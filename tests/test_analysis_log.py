@@ -21,7 +21,7 @@ from groundstation import Testbed, cli_analysis
 from groundstation.analysis import (AnalysisError, analyze_log, control_energy, los_jitter, psd,
                                     sensor_valid)
 from groundstation.analysis import log_metrics
-from groundstation.analysis.log_metrics import frame_steps, figures_from_testbed
+from groundstation.analysis.log_metrics import figures_from_testbed, frame_steps, missing_before
 from groundstation.cli import main
 from groundstation.logs import LogError, LogReader
 from groundstation.plant.testbed import load_testbed
@@ -70,7 +70,7 @@ def in_memory(path: Path, start=None, stop=None, *, integration_period_s=1.0, ps
     ok = sensor_valid(d["autocollimator"], range_rad=math.radians(tb.sensors["autocollimator_range"]),
                       raw_counts=d["raw/autocollimator"])
     j = los_jitter(d["autocollimator"], rate, integration_period_s=integration_period_s, valid=ok,
-                   gap_before=gap, missing_frames=missing)
+                   gap_before=gap, missing_before=missing_before(d["tick"]), missing_frames=missing)
     e = control_energy(d["current_coarse"], d["current_fine"], rate, tb.motor_coarse["resistance"],
                        tb.motor_fine["resistance"], coarse_saturated=d["coarse_saturated"],
                        fine_saturated=d["fine_saturated"], missing_frames=missing)
@@ -92,7 +92,7 @@ def test_chunked_reading_equals_the_in_memory_functions(sim_log, window):
     m = analyze_log(sim_log, start_s=window[0], stop_s=window[1], psd_segment_s=1.0, chunk_rows=97)
     assert m.frames == len(d["tick"]) == m.jitter.samples_used + m.jitter.samples_excluded
     for name in JITTER_FIGURES:
-        assert getattr(m.jitter, name) == pytest.approx(getattr(j, name), rel=1e-9), name
+        assert getattr(m.jitter, name) == pytest.approx(getattr(j, name), rel=1e-9, nan_ok=True), name
     assert (m.jitter.samples_used, m.jitter.samples_excluded, m.jitter.segments) == \
         (j.samples_used, j.samples_excluded, j.segments)
     for name in ENERGY_FIGURES:
@@ -106,7 +106,7 @@ def test_the_default_chunk_gives_the_same_figures(sim_log):
     small = analyze_log(sim_log, chunk_rows=1000)
     big = analyze_log(sim_log)
     for name in JITTER_FIGURES:
-        assert getattr(small.jitter, name) == pytest.approx(getattr(big.jitter, name), rel=1e-9)
+        assert getattr(small.jitter, name) == pytest.approx(getattr(big.jitter, name), rel=1e-9, nan_ok=True)
     assert small.energy.energy_total_j == pytest.approx(big.energy.energy_total_j, rel=1e-12)
 
 
@@ -162,6 +162,9 @@ def test_missing_frames_are_counted_and_never_bridged(sim_log, tmp_path):
     assert gap.tolist() == [False, False, True, True, False, True, False]
     # 11 -> 15: three missing; 15 -> 15 and 16 -> 2^32 - 1 (17 back, modulo the wrap) stall
     assert (missing, stalled) == (3, 2)
+    # per frame, for the high-pass's bridge: 3 before 15, -1 (no known length) at a stall
+    assert missing_before(np.array([10, 11, 15, 15, 16, 2 ** 32 - 1, 0], np.uint32), 9).tolist() == \
+        [0, 0, 3, -1, 0, -1, 0]
 
 
 def test_a_wrapping_tick_is_not_a_gap():
@@ -312,3 +315,21 @@ def test_a_sensor_that_never_moves_is_not_scored_as_perfect(tmp_path):
                and "--sensor encoder_inner" in n for n in m.notes)
     inner = analyze_log(log, sensor="encoder_inner")
     assert inner.jitter is not None and inner.jitter.std_rad > 0
+
+
+# ---------------------------------------------------------------------- validity
+def test_a_window_off_the_range_is_not_valid(sim_log):
+    """The log drove the autocollimator off its range: its row says which fraction of
+    the window was excluded and that the window is not valid (above 1 %), in words."""
+    m = analyze_log(sim_log)
+    row = m.row()
+    excluded = m.jitter.samples_excluded / (m.frames + m.missing_frames)
+    assert row["excluded_fraction"] == pytest.approx(excluded) and excluded > 0.01
+    assert row["valid"] is False and row["max_excluded_fraction"] == 0.01
+    assert "of the window off the autocollimator's range or at its A/D rail" in row["invalid_reason"]
+    assert "NOT VALID" in m.text()
+    assert row["highpass_samples_used"] + row["highpass_samples_settling"] == row["samples_used"]
+    # the limit is the caller's to move; the part before the excursion is a clean window
+    assert m.row(max_excluded_fraction=1.0)["valid"] is True
+    clean = analyze_log(sim_log, stop_s=1.5).row()
+    assert clean["valid"] is True and clean["excluded_fraction"] == 0.0 and clean["invalid_reason"] == ""

@@ -32,6 +32,8 @@ INERTIAL = ROOT / "profiles" / "testbeds" / "inertial_2dof.toml"
 DESIGN1 = ROOT / "profiles" / "controllers" / "relative_design1.toml"
 DESIGN2 = ROOT / "profiles" / "controllers" / "relative_design2.toml"
 WINDOW_S = 0.8
+#: dT_i short enough for the high-pass to settle (3 dT_i) inside the window
+PERIOD_S = 0.1
 SENSOR = "encoder_inner"          # the relative rig's angle (its autocollimator sees no motion)
 
 CAMPAIGN = f'''
@@ -47,6 +49,7 @@ ref = [0.0001, 0.0002]
 start_after_mark = "step {{ref}} on"
 duration_s = {WINDOW_S}
 sensor = "{SENSOR}"
+integration_period_s = {PERIOD_S}
 group_by = "ref"
 compare = "design"
 baseline = "relative_design1"
@@ -178,7 +181,8 @@ def test_the_window_and_the_figures_are_analyze_logs(campaign_run):
         ref = RUNS[row["run"]][1]
         start = independent_window(log, ref)
         assert row["window"]["start_s"] == pytest.approx(start, abs=1e-9)
-        m = analyze_log(log, sensor=SENSOR, start_s=start, stop_s=start + WINDOW_S).row()
+        m = analyze_log(log, sensor=SENSOR, start_s=start, stop_s=start + WINDOW_S,
+                        integration_period_s=PERIOD_S).row()
         assert m["to_s"] - m["from_s"] == pytest.approx(WINDOW_S, abs=2e-3)
         for key in ("std_urad", "highpass_rms_urad", "energy_total_j"):
             assert row["metrics"][key] == pytest.approx(m[key], rel=1e-12)
@@ -339,7 +343,7 @@ angle_rad = "{{ref}}"
 @pytest.mark.parametrize("table, message", [
     ('[analysis]\nwindow = 5', "check.toml: [analysis]: unknown key(s) window (allowed: start_after_mark, "
                                "duration_s, sensor, integration_period_s, group_by, compare, baseline, "
-                               "metrics)"),
+                               "metrics, max_excluded_fraction)"),
     ('[analysis]\nduration_s = -5', "check.toml: [analysis] duration_s = -5 - must be a finite number > 0 "
                                     "(seconds)"),
     ('[analysis]\nduration_s = "60"',
@@ -371,6 +375,10 @@ angle_rad = "{{ref}}"
     ('[analysis]\nmetrics = [1]', "[analysis] metrics = [1] - must be a list of metric names"),
     ('[analysis]\nmetrics = ["jitter"]', "'jitter': jitter and control energy are scored for every log "
                                          "anyway"),
+    ('[analysis]\nmax_excluded_fraction = 5', "check.toml: [analysis] max_excluded_fraction = 5 - must be "
+                                             "a fraction from 0 to 1"),
+    ('[analysis]\nmax_excluded_fraction = "1 %"', "[analysis] max_excluded_fraction = '1 %' - must be a "
+                                                 "fraction"),
 ])
 def test_analysis_table_problems_are_named(tmp_path, table, message):
     problems = analysis_problems(tmp_path, table)
@@ -395,6 +403,25 @@ def test_a_good_analysis_table_is_read(tmp_path):
     assert analysis_problems(tmp_path, '[analysis]\nmetrics = ["frf", "step", "frf"]') == []
     a = read_campaign(tmp_path / "check.toml")[0].analysis
     assert a.metrics == ("frf", "step") and a.as_dict()["metrics"] == ["frf", "step"]
+    # the validity limit: the analysis default unless the table sets it
+    assert a.max_excluded_fraction is None and a.excluded_limit() == 0.01
+    assert analysis_problems(tmp_path, '[analysis]\nmax_excluded_fraction = 0.05') == []
+    a = read_campaign(tmp_path / "check.toml")[0].analysis
+    assert a.excluded_limit() == 0.05 and a.as_dict()["max_excluded_fraction"] == 0.05
+
+
+def test_every_row_of_a_clean_campaign_is_valid(campaign_run):
+    """The relative rig's encoder never leaves its range and the simulator loses no
+    frame: every row says so, and the comparison ranks them all."""
+    _, folder = campaign_run
+    doc = json.loads((folder / "report.metrics.json").read_text())
+    for row in doc["rows"]:
+        m = row["metrics"]
+        assert m["valid"] is True and m["excluded_fraction"] == 0.0 and m["invalid_reason"] == ""
+        assert m["max_excluded_fraction"] == 0.01
+    assert all(c["valid"] and c["baseline_valid"] for c in doc["comparison"])
+    header = next(csv.reader(io.StringIO((folder / "report.metrics.csv").read_text())))
+    assert {"excluded_fraction", "valid", "highpass_samples_used"} <= set(header)
 
 
 def test_campaign_report_refuses_a_bad_analysis_table(campaign_run, tmp_path, capsys):
@@ -404,3 +431,26 @@ def test_campaign_report_refuses_a_bad_analysis_table(campaign_run, tmp_path, ca
     assert main(["campaign", "report", str(folder / "report.json"), "--campaign", str(bad),
                  "--html-only"]) == 2
     assert "sensor = 'gyro'" in capsys.readouterr().err
+
+
+def test_closed_loop_runs_get_the_mode_check(campaign_run):
+    """Each run closed a relative design's loop: its row carries the share of the
+    jitter in the band of that design's least-damped closed-loop mode, the band from
+    the design's own sampled loop (with the table the log recorded)."""
+    from groundstation.analysis.loop_mode import design_mode
+    from groundstation.params.design_file import load_design
+
+    _, folder = campaign_run
+    doc = json.loads((folder / "report.metrics.json").read_text())
+    expected = {p.stem: design_mode(load_design(p)) for p in (DESIGN1, DESIGN2)}
+    for row in doc["rows"]:
+        m = row["metrics"]
+        mode = expected[row["variables"]["design_stem"]]
+        assert m["mode_frequency_hz"] == pytest.approx(mode.frequency_hz, rel=1e-9)
+        lo, hi = m["mode_band_hz"]
+        assert lo < mode.frequency_hz < hi
+        assert 0.0 <= m["mode_share"] <= 1.0 and m["mode_dominates"] == (m["mode_share"] > 0.5)
+        assert "least-damped closed-loop pole pair" in m["mode_band_rule"]
+    assert all(c["mode_share"] is not None for c in doc["comparison"])
+    text = (folder / "report.txt").read_text()
+    assert "of its variance in" in text

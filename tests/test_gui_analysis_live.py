@@ -18,7 +18,7 @@ from PySide6.QtCore import Qt
 
 from groundstation.analysis import AnalysisError, analyze_log, control_energy, los_jitter, psd
 from groundstation.analysis.jitter import sensor_valid
-from groundstation.analysis.log_metrics import frame_steps
+from groundstation.analysis.log_metrics import frame_steps, missing_before
 from groundstation.codec import FrameCodec, StreamDeframer
 from groundstation.display_buffers import TelemetryStore
 from groundstation.gui.analysis_live import LiveSnapshot, live_metrics, take_snapshot
@@ -54,7 +54,8 @@ def expected_from_arrays(snap: LiveSnapshot, sensor: str, resistances, *, range_
     gap, missing, _ = frame_steps(snap.columns["tick"].astype(np.uint32))
     ok = sensor_valid(angle, range_rad=range_rad, raw_counts=counts)
     jitter = los_jitter(angle, snap.rate_hz, integration_period_s=PERIOD_S, valid=ok,
-                        gap_before=gap, missing_frames=missing)
+                        gap_before=gap, missing_frames=missing,
+                        missing_before=missing_before(snap.columns["tick"].astype(np.uint32)))
     energy = control_energy(snap.columns["current_coarse"], snap.columns["current_fine"],
                             snap.rate_hz, *resistances,
                             coarse_saturated=snap.columns["coarse_saturated"],

@@ -27,6 +27,7 @@ from typing import Any, Callable, Iterable
 
 from ..errors import GroundStationError
 from .batch_rows import EXTRA_METRICS, ROW_KEYS, extra_results, log_row
+from .validity import MAX_EXCLUDED_FRACTION
 
 log = logging.getLogger(__name__)
 
@@ -54,6 +55,10 @@ class BatchOptions:
     testbed: str | None = None
     frf_input: str = "current_coarse"
     frf_output: str = "encoder_outer"
+    #: a window with more than this excluded is not valid (analysis/validity.py)
+    max_excluded_fraction: float = MAX_EXCLUDED_FRACTION
+    #: the mode check's design: "auto" (the log's last upload), a file, None (no check)
+    design: str | None = "auto"
 
 
 # ------------------------------------------------------------------------ which logs
@@ -168,14 +173,15 @@ def analyze_one(path: str | Path, options: BatchOptions = BatchOptions(),
                 m = analyze_log(path, metrics=metrics, start_s=options.start_s,
                                 stop_s=options.stop_s, sensor=options.sensor,
                                 integration_period_s=options.integration_period_s,
-                                testbed=options.testbed, psd_segment_s=options.psd_segment_s)
+                                testbed=options.testbed, psd_segment_s=options.psd_segment_s,
+                                design=options.design)
             except GroundStationError as exc:
                 error = str(exc)
         ex = {} if error else extra_results(path, extras, start_s=options.start_s,
                                             stop_s=options.stop_s, frf_input=options.frf_input,
                                             frf_output=options.frf_output,
                                             testbed=options.testbed)
-        figures = log_row(path, m, error, ex)
+        figures = log_row(path, m, error, ex, max_excluded_fraction=options.max_excluded_fraction)
         if m is not None and m.missing_metrics:          # as the CLI's exit status 1
             figures["error"] = "; ".join(filter(None, [
                 figures["error"], f"not computed: {', '.join(m.missing_metrics)} (see notes)"]))

@@ -18,6 +18,7 @@ import numpy as np
 
 from ..errors import GroundStationError
 from .log_identification import DEFAULT_MIN_COHERENCE
+from .validity import MAX_EXCLUDED_FRACTION
 
 #: every key of a row, in the order of the CSV columns (cli_analysis.ROW_KEYS is this list)
 ROW_KEYS = ["log", "path", "test_name", "from_s", "to_s", "frames", "missing_frames", "sensor",
@@ -25,7 +26,10 @@ ROW_KEYS = ["log", "path", "test_name", "from_s", "to_s", "frames", "missing_fra
             "rms_urad", "std_urad", "highpass_rms_urad", "smear_rms_urad", "energy_coarse_j",
             "energy_fine_j", "energy_total_j", "rms_current_coarse_a", "rms_current_fine_a",
             "saturated_coarse_pct", "saturated_fine_pct", "psd_rms_urad", "psd_resolution_hz",
-            "psd_segments",
+            "psd_segments", "highpass_samples_used", "highpass_samples_settling",
+            "excluded_fraction", "valid", "invalid_reason", "max_excluded_fraction",
+            "mode_share", "mode_band_hz", "mode_frequency_hz", "mode_damping", "mode_dominates",
+            "mode_band_rule",
             "step_time_s", "step_size_urad", "step_rise_s", "step_overshoot_pct",
             "step_settling_s", "step_steady_state_error_urad", "step_peak_effort",
             "step_effort_channel",
@@ -121,14 +125,18 @@ def extra_figures(ex: dict[str, Any], min_coherence: float = DEFAULT_MIN_COHEREN
 
 
 def log_row(path: str | Path, m, error: str, ex: dict[str, Any],
-            min_coherence: float = DEFAULT_MIN_COHERENCE) -> dict[str, Any]:
+            min_coherence: float = DEFAULT_MIN_COHERENCE,
+            max_excluded_fraction: float = MAX_EXCLUDED_FRACTION) -> dict[str, Any]:
     """The flat row of one log: `m` its LogMetrics (None if not computed), `error` why
-    the log could not be analysed, `ex` its extra results; every key of ROW_KEYS."""
+    the log could not be analysed, `ex` its extra results; every key of ROW_KEYS.  A
+    window with more than `max_excluded_fraction` excluded is `valid` False."""
     if m is None:
         row = dict.fromkeys(ROW_KEYS)
-        row.update(log=Path(path).name, path=str(path), error=error, notes="")
+        row.update(log=Path(path).name, path=str(path), error=error, notes="", valid=False,
+                   invalid_reason="not analysed: " + (error or "no figures"),
+                   max_excluded_fraction=max_excluded_fraction)
     else:
-        row = {"path": str(path), **m.row()}
+        row = {"path": str(path), **m.row(max_excluded_fraction)}
     figures, notes, errors = extra_figures(ex, min_coherence)
     row.update(figures)
     row["notes"] = "; ".join(([row["notes"]] if row.get("notes") else []) + notes)

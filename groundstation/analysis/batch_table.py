@@ -25,14 +25,15 @@ SUFFIXES = (".parquet", ".csv")
 #: columns whose values are text even when every row left them empty
 TEXT_KEYS = {"path", "log", "campaign", "test_name", "design", "base_motion", "profiles",
              "created_utc", "sensor", "step_effort_channel", "frf_input", "frf_output",
-             "hyst_slope_table_file", "fv_torque_formula", "notes", "error"}
+             "hyst_slope_table_file", "fv_torque_formula", "notes", "error", "invalid_reason",
+             "mode_band_rule"}
 
 #: whole numbers and flags, so typed even in a column no log filled (a batch of failures)
 INTEGER_KEYS = {"bytes", "campaign_run", "run", "seed", "frames", "missing_frames",
                 "samples_used", "samples_excluded", "segments", "psd_segments",
                 "frf_coherent_bins", "hyst_branches", "hyst_complete_branches", "fv_segments",
-                "fv_settled_segments"}
-FLAG_KEYS = {"clean_close", "hyst_slope_table"}
+                "fv_settled_segments", "highpass_samples_used", "highpass_samples_settling"}
+FLAG_KEYS = {"clean_close", "hyst_slope_table", "valid", "mode_dominates"}
 
 
 def table_paths(out: str | Path) -> list[Path]:

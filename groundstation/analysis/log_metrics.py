@@ -41,6 +41,8 @@ from . import AnalysisError
 from .energy import ControlEnergy, EnergyAccumulator
 from .jitter import DEFAULT_INTEGRATION_PERIOD_S, JitterAccumulator, JitterResult, sensor_valid
 from .spectra import DEFAULT_SEGMENT_S, Spectrum, WelchAccumulator, segment_samples
+from .loop_mode import ModeCheck, mode_check
+from .validity import MAX_EXCLUDED_FRACTION, WindowValidity, window_validity
 
 PACKET = "HIGH_RATE"
 SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
@@ -134,6 +136,21 @@ def frame_steps(tick, previous_tick: int | None = None) -> tuple[np.ndarray, int
     return gap, int((odd[~back] - 1).sum()), int(back.sum())
 
 
+def missing_before(tick, previous_tick: int | None = None) -> np.ndarray:
+    """Frames missing just before each frame, from the device ticks (as frame_steps
+    counts them): k - 1 for a step of k > 1 ticks, -1 for a step of 0 or backwards (a
+    repeated or out-of-order frame: a break of no known length), else 0.  The jitter's
+    high-pass bridges a short hole with it (jitter.BRIDGE_MAX_PERIODS)."""
+    t = np.asarray(tick).astype(np.uint32, copy=False)
+    if not len(t):
+        return np.zeros(0, dtype=np.int64)
+    steps = np.empty(len(t), dtype=np.int64)
+    steps[0] = 1 if previous_tick is None else (int(t[0]) - int(previous_tick)) % TICK_MODULUS
+    steps[1:] = np.subtract(t[1:], t[:-1])             # uint32 arithmetic wraps with the tick
+    back = (steps == 0) | (steps >= TICK_MODULUS // 2)
+    return np.where(back, -1, steps - 1)
+
+
 # ---------------------------------------------------------------------- the result
 @dataclass(frozen=True)
 class LogMetrics:
@@ -157,6 +174,20 @@ class LogMetrics:
     #: what the figures were computed from when it is no log file (metrics_from_columns:
     #: e.g. "live window (last 30.0 s)"); '' for a log
     source: str = ""
+    #: samples of the window the scored sensor did not measure (None: no sensor scored)
+    sensor_excluded: int | None = None
+    #: why the scored sensor gave no figure at all ('' : it did, or none was asked for)
+    unscored: str = ""
+    #: the share of the jitter in the loop's lightly damped mode (None: no check; the
+    #: notes say why when one was asked for)
+    mode: ModeCheck | None = None
+
+    def validity(self, max_excluded_fraction: float = MAX_EXCLUDED_FRACTION) -> WindowValidity:
+        """How much of the window was excluded, and whether that leaves a measurement
+        (analysis/validity.py)."""
+        return window_validity(self.frames, self.missing_frames, self.sensor_excluded,
+                               sensor=self.sensor, max_excluded_fraction=max_excluded_fraction,
+                               unscored=self.unscored)
 
     @property
     def label(self) -> str:
@@ -169,9 +200,11 @@ class LogMetrics:
         have = {"jitter": self.jitter, "energy": self.energy, "psd": self.spectrum}
         return tuple(m for m in self.metrics if have[m] is None)
 
-    def text(self) -> str:
+    def text(self, max_excluded_fraction: float = MAX_EXCLUDED_FRACTION) -> str:
+        v = self.validity(max_excluded_fraction)
         lines = [f"{self.label}: {self.window_from_s:.3f}..{self.window_to_s:.3f} s, "
-                 f"{self.frames} frames" + (f", {self.missing_frames} missing" if self.missing_frames else "")]
+                 f"{self.frames} frames" + (f", {self.missing_frames} missing" if self.missing_frames else "")
+                 + ("" if v.valid else f" - NOT VALID: {v.reason}")]
         if self.jitter is not None:
             lines.append("  " + self.jitter.text())
         if self.energy is not None:
@@ -180,12 +213,17 @@ class LogMetrics:
             s = self.spectrum
             lines.append(f"  PSD of {self.sensor}: {s.segments} segments of {s.segment_samples} samples "
                          f"({s.resolution_hz:.3g} Hz), sqrt(CSP) {s.rms * 1e6:.3f} urad")
+        if self.mode is not None:
+            lines.append(f"  mode check ({self.mode.source}): {self.mode.text()}")
         lines += [f"  note: {n}" for n in self.notes]
         return "\n".join(lines)
 
-    def row(self) -> dict[str, Any]:
-        """The figures as one flat record (urad, J, A, %); None where not computed."""
+    def row(self, max_excluded_fraction: float = MAX_EXCLUDED_FRACTION) -> dict[str, Any]:
+        """The figures as one flat record (urad, J, A, %); None where not computed.
+        `valid` (bool) and `excluded_fraction` judge the window against
+        `max_excluded_fraction` (analysis/validity.py)."""
         j, e, s = self.jitter, self.energy, self.spectrum
+        v = self.validity(max_excluded_fraction)
 
         def ur(v: float | None) -> float | None:
             return None if v is None or not math.isfinite(v) else v * 1e6
@@ -215,8 +253,23 @@ class LogMetrics:
             "psd_rms_urad": ur(s.rms) if s else None,
             "psd_resolution_hz": s.resolution_hz if s else None,
             "psd_segments": s.segments if s else None,
+            "highpass_samples_used": j.highpass_samples_used if j else None,
+            "highpass_samples_settling": j.highpass_samples_settling if j else None,
+            "excluded_fraction": v.excluded_fraction, "valid": v.valid,
+            "invalid_reason": v.reason, "max_excluded_fraction": v.max_excluded_fraction,
+            **mode_figures(self.mode),
             "notes": "; ".join(self.notes), "error": "",
         }
+
+
+def mode_figures(mode: ModeCheck | None) -> dict[str, Any]:
+    """The mode check's keys of a row (None where there is no check)."""
+    if mode is None:
+        return dict.fromkeys(("mode_share", "mode_band_hz", "mode_frequency_hz", "mode_damping",
+                              "mode_dominates", "mode_band_rule"))
+    return {"mode_share": mode.share, "mode_band_hz": [mode.band_hz[0], mode.band_hz[1]],
+            "mode_frequency_hz": mode.mode.frequency_hz, "mode_damping": mode.mode.damping,
+            "mode_dominates": mode.dominates, "mode_band_rule": mode.mode.rule()}
 
 
 # ---------------------------------------------------------------------- one window's sums
@@ -261,20 +314,24 @@ class _WindowSums:
         self.energy = (EnergyAccumulator(rate, figures.resistance_coarse_ohm, figures.resistance_fine_ohm)
                        if "energy" in wanted else None)
         self.frames = self.missing = self.stalled = 0
+        self.excluded = 0                 # scored samples the sensor did not measure
+        self.unscored = ""                # why the sensor gave no figure at all
         self.last_tick: int | None = None
 
     def feed(self, ticks, angle=None, counts=None, currents=None, saturation=None) -> None:
         """The next piece: its ticks, the scored angle (None: not scoring) and counts
         (None: unknown), the currents and saturation bits (None: none)."""
         gap, m, s = frame_steps(ticks, self.last_tick)
+        holes = missing_before(ticks, self.last_tick) if m else None
         self.missing += m
         self.stalled += s
         self.last_tick = int(ticks[-1])
         self.frames += len(ticks)
         if angle is not None:
             ok = sensor_valid(angle, range_rad=self.range_rad, raw_counts=counts)
+            self.excluded += len(ok) - int(np.count_nonzero(ok))
             if self.jit is not None:
-                self.jit.feed(angle, ok, gap)
+                self.jit.feed(angle, ok, gap, holes)
             if self.welch is not None:
                 self.welch.feed(angle, ok, gap)
         if self.energy is not None:
@@ -296,6 +353,7 @@ class _WindowSums:
                              f"({jit.lowest:.6g} rad) over all {jit.n} samples and the testbed is "
                              f"the relative set-up, which has no autocollimator or IMU: --sensor "
                              f"encoder_inner")
+                self.unscored = f"the relative set-up has no {sensor}: nothing was measured"
                 jit = welch = None
             else:
                 notes.append(f"the {sensor} reads one constant value over all {jit.n} samples: "
@@ -305,6 +363,7 @@ class _WindowSums:
                 jitter = jit.result(sensor, missing_frames=self.missing, exclusion_rule=rule)
             except AnalysisError as exc:
                 notes.append(f"no jitter: {exc}")
+                self.unscored = f"no jitter: {exc}"
         if welch is not None:
             try:
                 spectrum = welch.result()
@@ -334,8 +393,14 @@ def analyze_log(path: str | Path, *, metrics: Iterable[str] = METRICS, start_s: 
                 integration_period_s: float = DEFAULT_INTEGRATION_PERIOD_S,
                 testbed: str | Path | Testbed | None = None, psd_segment_s: float = DEFAULT_SEGMENT_S,
                 chunk_rows: int = DEFAULT_CHUNK_ROWS,
-                on_progress: Callable[[int, int], None] | None = None) -> LogMetrics:
+                on_progress: Callable[[int, int], None] | None = None,
+                design: str | Path | None = None) -> LogMetrics:
     """The metrics of the log at `path` over its window (see the module docstring).
+
+    `design`: the mode check (loop_mode.py) of the run's loop - "auto" for the last
+    design the log records uploading (checked only when the window's frames ran in that
+    design's closed-loop mode), a design file (its recorded table if the log has one),
+    None for no check.  It needs the PSD (in `metrics`).
 
     `on_progress(frames_read, frames_in_window)` is called after each chunk; whatever it
     raises ends the analysis there and reaches the caller (the log closed): a caller's
@@ -350,11 +415,11 @@ def analyze_log(path: str | Path, *, metrics: Iterable[str] = METRICS, start_s: 
         raise AnalysisError(f"chunk_rows must be >= 1, not {chunk_rows}")
     with LogReader(path) as r:
         return _analyze(r, wanted, start_s, stop_s, sensor, integration_period_s, testbed,
-                        psd_segment_s, int(chunk_rows), on_progress)
+                        psd_segment_s, int(chunk_rows), on_progress, design)
 
 
 def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s, testbed,
-             psd_segment_s, chunk_rows, on_progress=None) -> LogMetrics:
+             psd_segment_s, chunk_rows, on_progress=None, design=None) -> LogMetrics:
     chans = {c.name: c for c in r.channels(PACKET)}
     rate = r.tick_rate_hz
     figures = figures_from_testbed(r, testbed)
@@ -395,6 +460,20 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
         else:
             notes.append("the log has no saturation status bits: saturation not reported")
 
+    loop = None
+    if design is not None and "psd" in wanted:
+        from .log_mode import AUTO, find_design
+        loop = find_design(r, design)
+        if loop.mode is None:
+            if loop.reason:
+                notes.append(f"no mode check: {loop.reason}")
+            loop = None
+        elif str(design) == AUTO and "mode" in chans:
+            columns.append("mode")           # the check wants the loop closed in the window
+    elif design is not None:
+        notes.append("no mode check: it needs the PSD (--metrics with psd)")
+    mode_counts: dict[int, int] = {}
+
     i0, i1 = r.index_range(PACKET, start_s, stop_s, relative=True)
     if i1 <= i0:
         raise AnalysisError(f"{r.path}: no {PACKET} frames in the window "
@@ -418,6 +497,10 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
         sums.feed(ticks, angle, counts,
                   (d[CURRENTS[0]], d[CURRENTS[1]]) if "energy" in wanted else None,
                   (d[sat_bits[0]], d[sat_bits[1]]) if sat_bits else None)
+        if "mode" in d:
+            values, n = np.unique(d["mode"], return_counts=True)
+            for v, k in zip(values.tolist(), n.tolist()):
+                mode_counts[v] = mode_counts.get(v, 0) + k
         a += len(ticks)
         if on_progress is not None:
             on_progress(sums.frames, i1 - i0)
@@ -427,12 +510,40 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
     last_t = float(r.read_rows(PACKET, ["device_time"], i0 + sums.frames - 1, i0 + sums.frames,
                                with_time=False)["device_time"][0])
     jitter, energy, spectrum = sums.finish(sensor, rule, figures.setup, notes)
+    mode = _mode_check(loop, spectrum, mode_counts, chans.get("mode"), sums.frames, notes)
     return LogMetrics(
         path=r.path, test_name=str(r.attrs.get("test_name", "")),
         window_from_s=first_t - origin, window_to_s=last_t - origin, frames=sums.frames,
         missing_frames=sums.missing, stalled_frames=sums.stalled, rate_hz=rate,
         sensor=sensor if scoring else "", metrics=wanted, testbed_source=figures.source,
-        jitter=jitter, energy=energy, spectrum=spectrum, notes=tuple(notes))
+        jitter=jitter, energy=energy, spectrum=spectrum, notes=tuple(notes),
+        sensor_excluded=sums.excluded if scoring else None, unscored=sums.unscored, mode=mode)
+
+
+def _mode_check(loop, spectrum: Spectrum | None, mode_counts: dict[int, int], channel,
+                frames: int, notes: list[str]) -> ModeCheck | None:
+    """The mode check of the window's PSD against `loop` (log_mode.DesignSource; None:
+    none).  With mode counts (the design was found automatically) the loop must have
+    been closed, in the design's mode, over most of the window."""
+    if loop is None:
+        return None
+    if spectrum is None:
+        notes.append("no mode check: no PSD of the window")
+        return None
+    if mode_counts:
+        from .log_mode import CLOSED_LOOP_STATES
+        state = channel.states.get(CLOSED_LOOP_STATES.get(loop.design_mode, ""))
+        closed = mode_counts.get(state, 0) if state is not None else 0
+        if closed * 2 <= frames:
+            notes.append(f"no mode check: the loop of {loop.source} was not closed over most of "
+                         f"the window ({closed} of {frames} frames in {loop.design_mode} mode)")
+            return None
+    try:
+        return mode_check(loop.mode, spectrum.frequency_hz, spectrum.density, spectrum.resolution_hz,
+                          loop.source)
+    except AnalysisError as exc:
+        notes.append(f"no mode check: {exc}")
+        return None
 
 
 # ---------------------------------------------------------------------- columns in memory
@@ -494,9 +605,11 @@ def metrics_from_columns(columns: Mapping[str, Any], rate_hz: float, figures: Te
         window_to_s=float(window_s[1]), frames=sums.frames, missing_frames=sums.missing,
         stalled_frames=sums.stalled, rate_hz=float(rate_hz), sensor=sensor if scoring else "",
         metrics=wanted, testbed_source=figures.source, jitter=jitter, energy=energy,
-        spectrum=spectrum, notes=tuple(notes), source=source)
+        spectrum=spectrum, notes=tuple(notes), source=source,
+        sensor_excluded=sums.excluded if scoring else None, unscored=sums.unscored)
 
 
 __all__ = ["CURRENTS", "DEFAULT_CHUNK_ROWS", "DEFAULT_SENSOR", "LogMetrics", "METRICS", "PACKET",
            "SATURATION_BITS", "SENSORS", "TICK_MODULUS", "TestbedFigures", "analyze_log", "frame_steps",
+           "missing_before",
            "figures_from_testbed", "metrics_from_columns"]

@@ -150,7 +150,11 @@ class CampaignMetrics:
             lines.append(f"{head}: jitter std {unit(m.get('std_urad'), 'urad')}, high-pass "
                          f"{unit(m.get('highpass_rms_urad'), 'urad')}, energy "
                          f"{unit(m.get('energy_total_j'), 'J')} over {seconds(r)} s"
-                         + (f" [{r['run_status']}]" if r["run_status"] not in ("completed", "") else ""))
+                         + (f" [{r['run_status']}]" if r["run_status"] not in ("completed", "") else "")
+                         + ("" if row_valid(r) else f" - NOT VALID: {invalid_reason(r)}"))
+            said = mode_text(m)
+            if said:
+                lines.append(f"    {'MODE: ' if m.get('mode_dominates') else ''}{said}")
             lines += row_lines(r, self.analysis.metrics)
             if r["notes"]:
                 lines.append(f"    note: {r['notes']}")
@@ -167,10 +171,16 @@ class CampaignMetrics:
                         lines.append(f"    {c}: {cell_text(cell)}")
                 for c in self.compared_labels():
                     cell = self.cell(g, c)
-                    if cell is not None and not cell["baseline"]:
-                        sentence = verdict(cell, self.baseline_label(), group_text(a, g, under=True))
-                        if sentence:
-                            lines.append(f"    => {sentence}")
+                    if cell is None:
+                        continue
+                    where = group_text(a, g, under=True)
+                    sentence = (validity_sentence(cell, self.baseline_label(), where)
+                                or ("" if cell["baseline"] else verdict(cell, self.baseline_label(), where)))
+                    if sentence:
+                        lines.append(f"    => {sentence}")
+                    flagged = mode_sentence(cell, where)
+                    if flagged:
+                        lines.append(f"    => {flagged}")
         lines += [f"note: {n}" for n in self.notes]
         return "\n".join(lines)
 
@@ -199,7 +209,8 @@ def campaign_metrics(report: CampaignReport, campaign: Campaign | None = None, *
             row, data[len(rows)] = _score(f, spec, report.campaign, run, variables,
                                           recording=str(rec.get("name", "")),
                                           part=part if len(files) > 1 else None,
-                                          run_status=run_status(report, run))
+                                          run_status=run_status(report, run),
+                                          design_dir=campaign.path.parent if campaign else None)
             rows.append(row)
         if not files:
             rows.append(_row(str(rec.get("name", "")), "", None, run, variables, run_status(report, run),
@@ -243,29 +254,46 @@ def _row(recording: str, file: str, part: int | None, run: int, variables: dict[
 
 def score_log(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
               variables: dict[str, Any] | None = None, *, recording: str = "",
-              part: int | None = None, run_status: str = "") -> dict[str, Any]:
+              part: int | None = None, run_status: str = "",
+              design_dir: Path | None = None) -> dict[str, Any]:
     """One log's row: its window found, `analyze_log` over it; whatever goes wrong is the
     row's `error` (the log unreadable, a channel missing, an empty window).  The
     reference metrics of `spec.metrics` join it (their failure: `reference_error`)."""
     return _score(path, spec, campaign, run, variables, recording=recording, part=part,
-                  run_status=run_status)[0]
+                  run_status=run_status, design_dir=design_dir)[0]
 
 
 def _score(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
            variables: dict[str, Any] | None = None, *, recording: str = "",
-           part: int | None = None, run_status: str = "") -> tuple[dict[str, Any], dict[str, Any]]:
+           part: int | None = None, run_status: str = "",
+           design_dir: Path | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """(the row, the reference metrics' results for the figures)."""
     row, unreadable = _score_jitter(path, spec, campaign, run, variables, recording=recording,
-                                    part=part, run_status=run_status)
+                                    part=part, run_status=run_status, design_dir=design_dir)
     if not spec.metrics or unreadable:
         return row, {}
     from .reference_metrics import add_to_row
     return row, add_to_row(row, path, spec.metrics)
 
 
+def run_design(variables: dict[str, Any], design_dir: Path | None) -> str | Path | None:
+    """The design whose loop a run closed, for the mode check: the matrix's `design`
+    value when it names a design file (relative to the campaign file), None when it
+    names none ("open_loop": no loop, no check), "auto" without a `design` key (the last
+    design the log records uploading, if the loop was closed in the window)."""
+    if "design" not in variables:
+        return "auto"
+    v = variables["design"]
+    if not isinstance(v, str) or not v.endswith(".toml"):
+        return None
+    p = Path(v)
+    return p if p.is_absolute() or design_dir is None else design_dir / p
+
+
 def _score_jitter(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
                   variables: dict[str, Any] | None = None, *, recording: str = "",
-                  part: int | None = None, run_status: str = "") -> tuple[dict[str, Any], bool]:
+                  part: int | None = None, run_status: str = "",
+                  design_dir: Path | None = None) -> tuple[dict[str, Any], bool]:
     """(the row of jitter and energy, whether the log could not be read at all)."""
     from ..analysis import analyze_log
     from ..logs import LogError
@@ -286,7 +314,8 @@ def _score_jitter(path: str | Path, spec: AnalysisSpec, campaign: str = "", run:
         elif spec.duration_s is not None:
             window.update(start_s=0.0, stop_s=spec.duration_s)
         m = analyze_log(path, start_s=window["start_s"], stop_s=window["stop_s"], sensor=spec.sensor,
-                        integration_period_s=spec.integration_period_s)
+                        integration_period_s=spec.integration_period_s,
+                        design=run_design(variables, design_dir))
     except GroundStationError as exc:
         return _row(recording, str(path), part, run, variables, run_status, window=window,
                     notes="; ".join(notes), error=str(exc).strip() or type(exc).__name__), \
@@ -295,7 +324,7 @@ def _score_jitter(path: str | Path, spec: AnalysisSpec, campaign: str = "", run:
         log.exception("scoring %s", path)
         return _row(recording, str(path), part, run, variables, run_status, window=window,
                     notes="; ".join(notes), error=f"{type(exc).__name__}: {exc}"), True
-    row = m.row()
+    row = m.row(spec.excluded_limit())
     said = row.pop("notes", "")
     if said:
         notes.append(said)
@@ -364,6 +393,8 @@ def compare(rows: list[dict[str, Any]], spec: AnalysisSpec,
         for i, c in enumerate(compared):
             mine = [r for r in members if r["variables"].get(spec.compare) == c]
             good = [r for r in mine if not r["error"]]
+            # a valid log first: a repeat that clipped must not hide one that measured
+            good.sort(key=lambda r: not row_valid(r))
             chosen[i] = good[0] if good else (mine[0] if mine else None)
             if len(mine) > 1:
                 notes.append(f"{len(mine)} logs for {spec.compare} = {label(c)}"
@@ -381,20 +412,31 @@ def _cell(row: dict[str, Any] | None, base: dict[str, Any] | None, group: Any, v
     cell: dict[str, Any] = {"group": label(group) if group is not None else "all",
                             "group_value": group, "compare": label(value), "compare_value": value,
                             "baseline": is_baseline, "run": None, "run_status": "", "log": "",
-                            "window_s": None, "error": ""}
+                            "window_s": None, "error": "", "valid": False, "invalid_reason": "",
+                            "excluded_fraction": None, "baseline_valid": None,
+                            "baseline_invalid_reason": ""}
     notes: list[str] = []
     if row is None:
         notes.append("no log")
+        cell["invalid_reason"] = "no log"
     else:
         cell.update(run=row["run"], run_status=row["run_status"], log=Path(row["file"]).name,
-                    window_s=window_seconds(row), error=row["error"])
+                    window_s=window_seconds(row), error=row["error"], valid=row_valid(row),
+                    invalid_reason=invalid_reason(row),
+                    excluded_fraction=finite(row["metrics"].get("excluded_fraction")))
+    if base is not None:
+        cell.update(baseline_valid=row_valid(base), baseline_invalid_reason=invalid_reason(base))
     figures = row["metrics"] if row is not None and not row["error"] else {}
     basefig = base["metrics"] if base is not None and not base["error"] else {}
+    # ratios only between two measurements: an invalid run (or baseline) is named, not ranked
+    comparable = cell["valid"] and (is_baseline or bool(cell["baseline_valid"]))
     for key in COMPARED:
         v, b = finite(figures.get(key)), finite(basefig.get(key))
         cell[key] = v
         ratio = None
-        if is_baseline and v is not None and v != 0:
+        if not comparable:
+            pass
+        elif is_baseline and v is not None and v != 0:
             ratio = 1.0
         elif v is not None and b is not None and b != 0:
             ratio = v / b
@@ -404,6 +446,12 @@ def _cell(row: dict[str, Any] | None, base: dict[str, Any] | None, group: Any, v
                and cell[key] is None]
     if missing:
         notes.append(f"no {', '.join(missing)} (the log's row says why)")
+    if row is not None and not row["error"] and not cell["valid"]:
+        notes.append(f"not valid: {cell['invalid_reason']} - not compared")
+    elif not is_baseline and row is not None and not row["error"] and base is not None \
+            and not base["error"] and not cell["baseline_valid"]:
+        notes.append(f"the baseline's run is not valid ({cell['baseline_invalid_reason']}): "
+                     f"no ratio")
     if not is_baseline and row is not None and not row["error"]:
         if base is None or base["error"]:
             notes.append("no baseline figures in this group: " + ("the baseline's log could not be "
@@ -417,6 +465,12 @@ def _cell(row: dict[str, Any] | None, base: dict[str, Any] | None, group: Any, v
             if w is not None and wb is not None and abs(w - wb) > WINDOW_TOLERANCE * max(w, wb):
                 notes.append(f"windows differ ({w:.3g} s vs the baseline's {wb:.3g} s): energies "
                              f"are totals over unequal times")
+    cell["mode_share"] = finite(figures.get("mode_share"))
+    cell["mode_band_hz"] = figures.get("mode_band_hz")
+    cell["mode_frequency_hz"] = finite(figures.get("mode_frequency_hz"))
+    cell["mode_dominates"] = bool(figures.get("mode_dominates"))
+    if cell["mode_dominates"]:
+        notes.append(mode_text(cell))
     if row is not None and row["run_status"] not in ("completed", ""):
         notes.append(f"run {row['run']} {row['run_status'].split(':')[0]}")
     cell["note"] = "; ".join(notes)
@@ -490,9 +544,60 @@ def cell_text(cell: dict[str, Any]) -> str:
     return text + (f" - {cell['note']}" if cell["note"] else "")
 
 
+def row_valid(row: dict[str, Any]) -> bool:
+    """A row whose window is a measurement: scored without error and `valid` (its
+    excluded fraction within the limit)."""
+    return not row["error"] and row["metrics"].get("valid") is True
+
+
+def invalid_reason(row: dict[str, Any]) -> str:
+    """Why a row is not valid ('' if it is)."""
+    if row["error"]:
+        return f"not scored: {row['error']}"
+    if row["metrics"].get("valid") is True:
+        return ""
+    return str(row["metrics"].get("invalid_reason") or "no validity figure")
+
+
+def mode_text(figures: dict[str, Any]) -> str:
+    """'jitter dominated by the loop's mode at 22.8 Hz (82 % of its variance in
+    21.7-23.9 Hz)' from a row's figures or a cell ('' without a mode check)."""
+    share, band, f = (finite(figures.get("mode_share")), figures.get("mode_band_hz"),
+                      finite(figures.get("mode_frequency_hz")))
+    if share is None or not band or f is None:
+        return ""
+    where = f"{share * 100:.0f} % of its variance in {band[0]:.3g}-{band[1]:.3g} Hz"
+    if figures.get("mode_dominates"):
+        return f"jitter dominated by the loop's lightly damped mode at {f:.3g} Hz ({where})"
+    return f"mode check: {where} (the loop's mode at {f:.3g} Hz)"
+
+
+def mode_sentence(cell: dict[str, Any], where: str) -> str:
+    """'inertial_design1 under base_motion BM2: jitter dominated by ... - a limit cycle of
+    the loop, not base-motion rejection' ('' when the mode does not dominate)."""
+    if not cell.get("mode_dominates"):
+        return ""
+    return (f"{cell['compare']}" + (f" {where}" if where else "")
+            + f": {mode_text(cell)} - a limit cycle of the loop, not base-motion rejection")
+
+
+def validity_sentence(cell: dict[str, Any], baseline: str, where: str) -> str:
+    """'open_loop under base_motion BM2: not valid, 52 % of the window off the
+    autocollimator's range ...' for a cell left out of the comparison ('' otherwise)."""
+    head = f"{cell['compare']}" + (f" {where}" if where else "")
+    if cell["note"] == "no log" or cell["error"]:
+        return ""
+    if not cell["valid"]:
+        return f"{head}: not valid, {cell['invalid_reason']} - not ranked"
+    if not cell["baseline"] and cell["baseline_valid"] is False:
+        return (f"{head}: no comparison, the baseline {baseline} is not valid "
+                f"({cell['baseline_invalid_reason']})")
+    return ""
+
+
 def verdict(cell: dict[str, Any], baseline: str, where: str) -> str:
     """'relative_design2 cuts jitter by 80 % and energy by 97 % vs relative_design1 under
-    ref 0.0001' ('' when a figure is missing)."""
+    ref 0.0001' ('' when a figure is missing, or either run is not valid)."""
     j, e = cell["std_urad_change_pct"], cell["energy_total_j_change_pct"]
     if j is None or e is None:
         return ""
@@ -550,5 +655,6 @@ def write_metrics(metrics: CampaignMetrics, report: CampaignReport, report_path:
     return written
 
 
-__all__ = ["COMPARED", "CampaignMetrics", "campaign_metrics", "compare", "label", "mark_start",
-           "output_paths", "score_log", "write_metrics"]
+__all__ = ["COMPARED", "CampaignMetrics", "campaign_metrics", "compare", "invalid_reason", "label",
+           "mark_start", "mode_sentence", "mode_text", "output_paths", "row_valid", "run_design",
+           "score_log", "validity_sentence", "write_metrics"]

@@ -60,13 +60,23 @@ class AnalysisSpec:
     compare: str = ""                    # a matrix key: the values compared in each group
     baseline: Any = None                 # the value of `compare` (as in [matrix]) others are relative to
     metrics: tuple[str, ...] = ()        # reference metrics per log (REFERENCE_METRICS)
+    #: a window with more than this fraction excluded is not valid (None: the analysis
+    #: default, analysis/validity.py MAX_EXCLUDED_FRACTION)
+    max_excluded_fraction: float | None = None
     given: bool = False                  # the file has an [analysis] table
 
     def as_dict(self) -> dict[str, Any]:
         return {"start_after_mark": self.start_after_mark, "duration_s": self.duration_s,
                 "sensor": self.sensor, "integration_period_s": self.integration_period_s,
                 "group_by": self.group_by, "compare": self.compare, "baseline": self.baseline,
-                "metrics": list(self.metrics)}
+                "metrics": list(self.metrics), "max_excluded_fraction": self.excluded_limit()}
+
+    def excluded_limit(self) -> float:
+        """The excluded fraction above which a window is not valid."""
+        if self.max_excluded_fraction is not None:
+            return self.max_excluded_fraction
+        from ..analysis.validity import MAX_EXCLUDED_FRACTION   # plain Python, no numpy
+        return MAX_EXCLUDED_FRACTION
 
 
 @dataclass

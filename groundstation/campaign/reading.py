@@ -18,7 +18,7 @@ from .model import REFERENCE_METRICS, AnalysisSpec, Campaign, CampaignError, Ste
 
 #: the keys of the optional [analysis] table (campaign/metrics.py scores the logs with them)
 ANALYSIS_KEYS = ("start_after_mark", "duration_s", "sensor", "integration_period_s", "group_by",
-                 "compare", "baseline", "metrics")
+                 "compare", "baseline", "metrics", "max_excluded_fraction")
 
 
 def load_campaign(path: str | Path, dictionary=None) -> Campaign:
@@ -113,6 +113,13 @@ def read_analysis(table: Any, path: Path, name: str, matrix: dict[str, list[Any]
                 bad(key, "must be a finite number > 0 (seconds)")
             else:
                 values[key] = float(v)
+    if "max_excluded_fraction" in table:
+        v = table["max_excluded_fraction"]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+            bad("max_excluded_fraction", "must be a fraction from 0 to 1 (0.01: a window with more "
+                                         "than 1 % excluded is not valid)")
+        else:
+            values["max_excluded_fraction"] = float(v)
     if "sensor" in table:
         from ..analysis import SENSORS            # the log adapter (numpy, h5py): only here
         if table["sensor"] not in SENSORS:

@@ -21,7 +21,8 @@ import math
 from pathlib import Path
 from typing import Any, Callable
 
-from .metrics import COMPARED, CampaignMetrics, describe, group_text, num, pct, verdict
+from .metrics import (COMPARED, CampaignMetrics, describe, group_text, mode_sentence, num, pct,
+                      row_valid, validity_sentence, verdict)
 from .report import CampaignReport
 
 FIGURE_TITLES = {"jitter": "Jitter", "energy": "Control energy", "relative": "Relative to the baseline"}
@@ -35,13 +36,18 @@ def bar_figures(metrics: CampaignMetrics) -> dict[str, bytes]:
         groups = metrics.groups()
         names = metrics.compared_labels()
 
-        def series(key: str, scale: float = 1.0) -> list[tuple[str, list[float | None]]]:
+        def series(key: str, scale: float = 1.0) -> list[tuple[str, list[float | str | None]]]:
             out = []
             for name in names:
-                values = []
+                values: list[float | str | None] = []
                 for g in groups:
                     cell = metrics.cell(g, name)
                     v = cell.get(key) if cell is not None else None
+                    # an invalid run is named on the chart, not drawn beside the others
+                    if cell is not None and cell["note"] != "no log" and not cell["error"] \
+                            and not cell["valid"]:
+                        values.append("not valid")
+                        continue
                     values.append(None if v is None else v * scale)
                 out.append((name + (" (baseline)" if name == metrics.baseline_label() else ""), values))
             return out
@@ -66,8 +72,9 @@ def bar_figures(metrics: CampaignMetrics) -> dict[str, bytes]:
         return {}
     ticks = [f"run {r['run']}" + (f"\n{Path(r['file']).stem[-24:]}" if len(rows) > 1 else "") for r in rows]
 
-    def per_log(key: str) -> list[float | None]:
-        return [None if r["error"] else r["metrics"].get(key) for r in rows]
+    def per_log(key: str) -> list[float | str | None]:
+        return [None if r["error"] else r["metrics"].get(key) if row_valid(r) else "not valid"
+                for r in rows]
     return {
         "jitter": _chart([(f"Jitter of {metrics.analysis.sensor}", "urad",
                            [("std", per_log("std_urad")), ("high-pass RMS", per_log("highpass_rms_urad"))])],
@@ -80,10 +87,10 @@ def _fmt(v: float) -> str:
     return f"{v:.3g}"
 
 
-def _chart(panels: list[tuple[str, str, list[tuple[str, list[float | None]]]]], groups: list[str],
+def _chart(panels: list[tuple[str, str, list[tuple[str, list[float | str | None]]]]], groups: list[str],
            fmt: Callable[[float], str], reference: float | None = None, xlabel: str = "") -> bytes:
     """Side-by-side panels of grouped bars: (title, unit, [(series name, one value per
-    group)]); a missing value is drawn as 'n/a'."""
+    group)]); a missing value is drawn as 'n/a', a text (e.g. 'not valid') as itself."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -97,10 +104,12 @@ def _chart(panels: list[tuple[str, str, list[tuple[str, list[float | None]]]]], 
         width = 0.8 / n
         for i, (name, values) in enumerate(series):
             xs = [g - 0.4 + width * (i + 0.5) for g in range(len(groups))]
-            heights = [math.nan if v is None else v for v in values]
+            heights = [math.nan if v is None or isinstance(v, str) else v for v in values]
             ax.bar(xs, heights, width, label=name, color=f"C{i % 10}")
             for x, v in zip(xs, values):
-                ax.annotate("n/a" if v is None else fmt(v), (x, 0.0 if v is None else v),
+                shown = "n/a" if v is None else v if isinstance(v, str) else fmt(v)
+                at = 0.0 if v is None or isinstance(v, str) else v
+                ax.annotate(shown, (x, at),
                             xytext=(0, 2), textcoords="offset points", ha="center", va="bottom",
                             fontsize=7)
         if reference is not None:
@@ -127,6 +136,7 @@ table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.85em; }
 th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; }
 th { background: #eee; } td.text { text-align: left; }
 tr.baseline td { background: #f4f8ff; } tr.error td { background: #fff0f0; }
+tr.invalid td { background: #fff8e0; color: #666; }
 img { max-width: 100%; display: block; margin: 0.5em 0 1.5em; }
 pre { background: #f6f6f6; padding: 0.5em; white-space: pre-wrap; }
 """
@@ -160,8 +170,11 @@ def html_page(metrics: CampaignMetrics, report: CampaignReport, figures: dict[st
         out.append(f"<h2>{_e(title)}</h2>")
         out.append(f"<p>relative to {_e(metrics.baseline_label())} in each group</p>")
         out.append(_comparison_table(metrics))
-        sentences = [verdict(c, metrics.baseline_label(), group_text(a, c["group"], under=True))
-                     for c in metrics.comparison if not c["baseline"]]
+        sentences = [validity_sentence(c, metrics.baseline_label(), group_text(a, c["group"], under=True))
+                     or ("" if c["baseline"] else
+                         verdict(c, metrics.baseline_label(), group_text(a, c["group"], under=True)))
+                     for c in metrics.comparison]
+        sentences += [mode_sentence(c, group_text(a, c["group"], under=True)) for c in metrics.comparison]
         sentences = [s for s in sentences if s]
         if sentences:
             out.append("<ul>" + "".join(f"<li>{_e(s)}</li>" for s in sentences) + "</ul>")
@@ -192,7 +205,9 @@ def _comparison_table(metrics: CampaignMetrics) -> str:
     head += ["window (s)", "note"]
     lines = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
     for c in metrics.comparison:
-        cls = ' class="error"' if c["error"] else ' class="baseline"' if c["baseline"] else ""
+        cls = (' class="error"' if c["error"] else
+               ' class="invalid"' if c["note"] != "no log" and not c["valid"] else
+               ' class="baseline"' if c["baseline"] else "")
         cells = [_td(c["group"], True), _td(c["compare"], True), _td(c["run"])]
         for key in COMPARED:
             cells.append(_td(num(c[key])))
@@ -207,11 +222,13 @@ def _comparison_table(metrics: CampaignMetrics) -> str:
 
 
 _ROW_FIGURES = [("from_s", "from (s)"), ("to_s", "to (s)"), ("frames", "frames"),
-                ("missing_frames", "missing"), ("mean_urad", "mean (µrad)"),
+                ("missing_frames", "missing"), ("excluded_pct", "excluded (%)"),
+                ("valid", "valid"), ("mean_urad", "mean (µrad)"),
                 ("std_urad", "std (µrad)"), ("highpass_rms_urad", "high-pass RMS (µrad)"),
                 ("rms_urad", "RMS (µrad)"), ("energy_total_j", "energy (J)"),
                 ("energy_coarse_j", "coarse (J)"), ("energy_fine_j", "fine (J)"),
-                ("saturated_coarse_pct", "coarse sat. (%)"), ("saturated_fine_pct", "fine sat. (%)")]
+                ("saturated_coarse_pct", "coarse sat. (%)"), ("saturated_fine_pct", "fine sat. (%)"),
+                ("mode_share_pct", "mode share (%)"), ("mode_band", "mode band (Hz)")]
 
 
 def _rows_table(metrics: CampaignMetrics) -> str:
@@ -222,13 +239,23 @@ def _rows_table(metrics: CampaignMetrics) -> str:
         start = f"mark '{w['mark']}'" if w["start"] == "mark" else w["start"]
         cells = [_td(r["run"]), _td(r["run_status"], True), _td(describe(r["variables"]), True),
                  _td(Path(r["file"]).name, True), _td(start, True)]
-        cells += [_td(num(r["metrics"].get(k)) if isinstance(r["metrics"].get(k), float)
-                      else r["metrics"].get(k)) for k, _ in _ROW_FIGURES]
-        said = [("ERROR " + r["error"]) if r["error"] else r["notes"]]
+        shown = dict(r["metrics"])
+        if isinstance(shown.get("excluded_fraction"), float):
+            shown["excluded_pct"] = 100.0 * shown["excluded_fraction"]
+        shown["valid"] = "yes" if row_valid(r) else "NO"
+        if isinstance(shown.get("mode_share"), float):
+            shown["mode_share_pct"] = 100.0 * shown["mode_share"]
+            lo, hi = shown["mode_band_hz"]
+            shown["mode_band"] = f"{lo:.3g}-{hi:.3g}" + (" DOMINATES" if shown.get("mode_dominates") else "")
+        cells += [_td(num(shown.get(k)) if isinstance(shown.get(k), float)
+                      else shown.get(k)) for k, _ in _ROW_FIGURES]
+        said = [("ERROR " + r["error"]) if r["error"] else
+                "; ".join(x for x in [r["notes"], "" if row_valid(r) else
+                                      "not valid: " + str(r["metrics"].get("invalid_reason", ""))] if x)]
         if r.get("reference_error"):
             said.append("reference metric: " + r["reference_error"])
         cells.append(_td("; ".join(x for x in said if x), True))
-        cls = ' class="error"' if r["error"] else ""
+        cls = ' class="error"' if r["error"] else "" if row_valid(r) else ' class="invalid"'
         lines.append(f"<tr{cls}>" + "".join(cells) + "</tr>")
     lines.append("</table>")
     return "\n".join(lines)
