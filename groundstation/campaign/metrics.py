@@ -597,8 +597,13 @@ def validity_sentence(cell: dict[str, Any], baseline: str, where: str) -> str:
 
 def verdict(cell: dict[str, Any], baseline: str, where: str) -> str:
     """'relative_design2 cuts jitter by 80 % and energy by 97 % vs relative_design1 under
-    ref 0.0001' ('' when a figure is missing, or either run is not valid)."""
-    j, e = cell["std_urad_change_pct"], cell["energy_total_j_change_pct"]
+    ref 0.0001' ('' when a figure is missing, or either run is not valid).  Jitter is the
+    reference's metric, the high-pass RMS over the integration period; the standard
+    deviation (said so) only where the window has no settled high-pass figure."""
+    j, e = cell.get("highpass_rms_urad_change_pct"), cell["energy_total_j_change_pct"]
+    jitter = "jitter"
+    if j is None:
+        j, jitter = cell["std_urad_change_pct"], "jitter (std)"
     if j is None or e is None:
         return ""
 
@@ -608,9 +613,9 @@ def verdict(cell: dict[str, Any], baseline: str, where: str) -> str:
     def what(change: float, name: str) -> str:
         return f"{name} unchanged (within 1 %)" if round(change) == 0 else f"{name} by {abs(change):.0f} %"
     if verb(j) == verb(e):              # "cuts jitter by 60 % and energy by 95 %"
-        words = f"{verb(j)} {what(j, 'jitter')} and {what(e, 'energy')}"
+        words = f"{verb(j)} {what(j, jitter)} and {what(e, 'energy')}"
     else:
-        words = f"{verb(j)} {what(j, 'jitter')} and {verb(e)} {what(e, 'energy')}"
+        words = f"{verb(j)} {what(j, jitter)} and {verb(e)} {what(e, 'energy')}"
     return f"{cell['compare']} {words} vs {baseline}" + (f" {where}" if where else "")
 
 
