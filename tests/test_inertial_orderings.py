@@ -44,7 +44,7 @@ def rows_by_motion(tmp_path_factory):
         report = CampaignRunner(campaign, tb, max_step_seconds=BASE_MOTION_S).run()
     assert report.status == "completed", report.summary()
     metrics = campaign_metrics(report, campaign)
-    rows: dict[str, dict[str, dict]] = {}
+    rows: dict[str, dict[str, dict]] = {"comparison": metrics.comparison}
     for row in metrics.rows:
         assert not row["error"], row["error"]
         design = Path(str(row["variables"]["design"])).stem
@@ -67,8 +67,8 @@ def bm1_rows(rows_by_motion):
 
 
 def test_every_run_completed_from_a_verified_start_without_a_fault(rows_by_motion):
-    assert sorted(rows_by_motion) == MOTIONS
-    for rows in rows_by_motion.values():
+    assert sorted(k for k in rows_by_motion if k != "comparison") == MOTIONS
+    for rows in (rows_by_motion[m] for m in MOTIONS):
         assert sorted(rows) == ["inertial_design1", "inertial_design2",
                                 "inertial_design2_friction_comp", "open_loop"]
         for m in rows.values():
@@ -77,11 +77,38 @@ def test_every_run_completed_from_a_verified_start_without_a_fault(rows_by_motio
 
 
 def test_closed_loop_runs_never_leave_the_autocollimator(motion_rows):
-    """Every closed-loop run is a measurement: nothing of its window excluded."""
+    """Every closed-loop run is a measurement: nothing of its window excluded, valid."""
     motion, rows = motion_rows
     for design, m in rows.items():
         if design != "open_loop":
             assert m["samples_excluded"] == 0, (motion, design, m["samples_excluded"])
+            assert m["valid"] is True, (motion, design, m["invalid_reason"])
+
+
+def test_invalid_runs_are_named_and_never_ranked(rows_by_motion):
+    """A run whose window the report marks not valid gets no ratio in the comparison."""
+    for cell in rows_by_motion["comparison"]:
+        if not cell["valid"]:
+            assert cell["highpass_rms_urad_ratio"] is None and cell["energy_total_j_ratio"] is None
+            assert "not valid" in cell["note"]
+        else:
+            assert cell["compare"] != "open_loop" or cell["excluded_fraction"] <= 0.01
+
+
+def test_the_loop_mode_is_checked_and_does_not_make_design2s_results(motion_rows):
+    """Every closed-loop run gets the mode check from its own design.  Design #2's and the
+    compensated runs' jitter is base-motion rejection, not the 22.8 Hz mode (issue 28:
+    under the first BM2/BM3 most of it was that mode); a run where the mode dominates
+    carries the flag."""
+    motion, rows = motion_rows
+    for design, m in rows.items():
+        if design == "open_loop":
+            assert m["mode_share"] is None
+            continue
+        assert 21.0 < m["mode_frequency_hz"] < 24.5, (motion, design, m["mode_band_hz"])
+        assert m["mode_dominates"] == (m["mode_share"] > 0.5), (motion, design)
+    for design in ("inertial_design2", "inertial_design2_friction_comp"):
+        assert rows[design]["mode_share"] < 0.2, (motion, design, rows[design]["mode_share"])
 
 
 def test_jitter_follows_the_reference_ordering(motion_rows):
