@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import shlex
 import sys
 import time
 from pathlib import Path
@@ -58,10 +59,12 @@ def add_parsers(sub) -> argparse._SubParsersAction:
                                   "       off), the run's log closed with the reason; continue\n"
                                   "       with --resume REPORT.json")
     s.add_argument("file")
-    s.add_argument("--device", default="sim", help="sim | tcp://HOST:PORT | serial://PORT?baud=N")
-    s.add_argument("--fast", action="store_true",
+    # device, fast, fast-sim, seed, testbed, log folder: None when not typed, so that a
+    # resume can take the report's own (campaign/run_setup.py) and see a contradiction
+    s.add_argument("--device", default=None, help="sim (default) | tcp://HOST:PORT | serial://PORT?baud=N")
+    s.add_argument("--fast", action="store_true", default=None,
                    help="with --device sim: run the simulator as fast as it goes (device time)")
-    s.add_argument("--fast-sim", choices=("process", "inline"), default="process",
+    s.add_argument("--fast-sim", choices=("process", "inline"), default=None,
                    help="with --fast: the simulator in a child process of its own (default; "
                         "a core to itself) or in this process")
     s.add_argument("--generator", default="auto",
@@ -69,11 +72,16 @@ def add_parsers(sub) -> argparse._SubParsersAction:
                         "for an inertial testbed; none: no generator)")
     s.add_argument("--log-folder", default=None, help="where the logs go (default logs/CAMPAIGN)")
     s.add_argument("--report", default=None, help="report file (default: LOG_FOLDER/report.json)")
-    s.add_argument("--resume", default=None, help="a report of a failed run: continue from its failed run")
+    s.add_argument("--resume", default=None,
+                   help="a report of a failed or interrupted run: continue from its failed run, "
+                        "on the set-up the report records (device, fast, seed, testbed, log folder)")
+    s.add_argument("--allow-setup-change", action="store_true",
+                   help="with --resume: allow a device, clock, seed or testbed other than the "
+                        "report's (its runs then come from two set-ups; the report says so)")
     s.add_argument("--max-step-seconds", type=_positive_seconds, default=None,
                    help="cap every dwell and profile at S seconds (trial runs and tests; "
                         "a base-motion profile keeps its period)")
-    s.add_argument("--seed", type=int, default=0, help="simulator seed")
+    s.add_argument("--seed", type=int, default=None, help="simulator seed (default 0)")
     s.add_argument("--testbed", default=None, metavar="TESTBED.toml",
                    help="run on this testbed file in place of the campaign's own (e.g. a variant "
                         "of the same rig); every step is checked against it before anything runs")
@@ -195,23 +203,34 @@ def _on_testbed(campaign, testbed: Path, dictionary):
 
 def _cmd_run(args) -> int:
     from .campaign import CampaignReport, CampaignRunner, load_campaign
+    from .campaign.run_setup import resolve_setup
     from .dictionary import load_dictionary
     from .scripting import Testbed
 
+    given = {k: getattr(args, k) for k in ("device", "fast", "fast_sim", "seed", "testbed", "log_folder")
+             if getattr(args, k) is not None}
     try:
         dictionary = load_dictionary(getattr(args, "protocol_dir", None))
         c = load_campaign(args.file, dictionary)
-        if args.testbed:
-            c = _on_testbed(c, Path(args.testbed), dictionary)
         resume = CampaignReport.load(args.resume) if args.resume else None
+        setup, notes = resolve_setup(given, resume.setup if resume else None,
+                                     allow_change=args.allow_setup_change,
+                                     report_name=args.resume or "the report")
+        if setup["testbed"]:
+            c = _on_testbed(c, Path(setup["testbed"]), dictionary)
         if args.publish:                # refused before the rig is touched, not after
             from .fanout.endpoints import check_bind
             check_bind(args.publish, have_keys=bool(args.curve_keys))
     except GroundStationError as exc:
         _print_problems(exc)
         return EXIT_MALFORMED
-    folder = Path(args.log_folder or Path("logs") / c.name)
-    report_path = Path(args.report or folder / "report.json")
+    for note in notes:
+        print(note, flush=True)
+    folder = Path(setup["log_folder"] or Path("logs") / c.name)
+    # a resume writes its report where the one it continues was, unless told otherwise
+    report_path = Path(args.report or (args.resume if resume else folder / "report.json"))
+    setup = {**setup, "testbed": str(Path(setup["testbed"]).resolve()) if setup["testbed"] else None,
+             "log_folder": str(folder)}
     operator = (lambda prompt: input(f"{prompt} - continue? [y/N] ").strip().lower() == "y") \
         if sys.stdin.isatty() else None
     generator = None if args.generator == "none" else args.generator
@@ -219,9 +238,9 @@ def _cmd_run(args) -> int:
     report = None
     interrupted = False
     try:
-        with Testbed(args.device, testbed=c.testbed, fast=args.fast, generator=generator,
-                     log_folder=folder, seed=args.seed, take_over=args.take_over, operator=operator,
-                     publish=args.publish, curve_keys=args.curve_keys, fast_sim=args.fast_sim,
+        with Testbed(setup["device"], testbed=c.testbed, fast=setup["fast"], generator=generator,
+                     log_folder=folder, seed=setup["seed"], take_over=args.take_over, operator=operator,
+                     publish=args.publish, curve_keys=args.curve_keys, fast_sim=setup["fast_sim"],
                      echo=lambda text: print(f"    {text}", flush=True)) as tb:
             runner = CampaignRunner(c, tb, max_step_seconds=args.max_step_seconds,
                                     progress=_Progress(len(c.steps)))
@@ -235,11 +254,17 @@ def _cmd_run(args) -> int:
         print(f"error: {exc}", file=sys.stderr)
     if report is None:
         return EXIT_INTERRUPTED if interrupted else EXIT_FAILED
+    report.setup = setup
     report.save(report_path)
     print(report.summary())
     print(f"report: {report_path} (and {report_path.with_suffix('.txt').name}); "
           f"{time.monotonic() - t0:.1f} s")
-    if not args.no_analysis and report.recordings:
+    if report.status == "interrupted" and report.recordings and not args.no_analysis:
+        # the operator asked to stop: the report is written, the scoring (seconds for a
+        # long campaign) waits until asked for
+        print(f"metrics not computed after the interrupt: groundstation campaign report "
+              f"{shlex.quote(str(report_path))}")
+    elif not args.no_analysis and report.recordings:
         _write_metrics(report, report_path, c)
     if report.status == "interrupted":
         return EXIT_INTERRUPTED

@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from .model import CampaignError
+from .run_setup import resume_command
 
 
 @dataclass
@@ -36,6 +37,9 @@ class CampaignReport:
     completed_runs: list[int] = field(default_factory=list)
     failed_runs: dict[str, str] = field(default_factory=dict)     # run number -> reason
     report_file: str = ""             # where save() wrote it (named in the resume hint)
+    #: how it was run (device, fast, fast_sim, seed, testbed, log_folder): a resume takes
+    #: these (run_setup.py); {} in reports written before they were kept
+    setup: dict[str, Any] = field(default_factory=dict)
 
     def save(self, path: str | Path) -> Path:
         path = Path(path)
@@ -66,8 +70,7 @@ class CampaignReport:
             if self.status == "interrupted":
                 lines.append("interrupted by the operator (Ctrl-C): the rig was made safe (ABORT, "
                              "generator off) and the run's log closed with that reason")
-            lines.append(f"resume with: groundstation campaign run {self.file} "
-                         f"--resume {self.report_file or 'REPORT.json'}")
+            lines.append(f"resume with: {resume_command(self.file, self.report_file, self.setup)}")
         for rec in self.recordings:
             lines.append(f"  log {', '.join(Path(f).name for f in rec.get('files', []))}: "
                          f"{rec.get('frames', 0)} frames, {rec.get('discarded_blocks', 0)} blocks discarded"
