@@ -9,11 +9,19 @@ its drops are its own (frames missing from the packets' sequence numbers, whatev
 lost them: the device link, or this viewer being too slow for the publisher's
 high-water mark).  Messages it missed are counted too (`missed_messages`).
 
+Everything it receives is untrusted (on loopback without keys, any local process can
+bind the address it watches): wire.parse checks sizes, nesting and each kind's schema
+(schema.py); a message failing a check is counted (`bad_messages`) with its reason and
+ignored.  A jump of the message sequence beyond MAX_SEQUENCE_GAP is counted as a
+resynchronisation (`message_resyncs`), not as missed messages.
+
 It never holds a session token.  `command` refuses everything but ABORT with
 ReadOnlyConsole; ABORT goes straight to the device (abort.py).  Link states: 'up' while
-messages arrive, 'lost' after `silence_s` without any (ZeroMQ keeps reconnecting by
-itself: 'up' again when the publisher is back), 'closed'.  What the commander's own
-link does arrives as 'remote' events (add_remote_listener) and in `hello`.
+valid messages arrive; 'lost' after `silence_s` without a valid one, or after
+BAD_IN_A_ROW bad messages in a row (ZeroMQ keeps reconnecting by itself: 'up' again at
+the next valid message); 'failed' if the reader thread meets an unexpected error - it
+then stops, with the reason in `failure` (never silently); 'closed'.  What the
+commander's own link does arrives as 'remote' events (add_remote_listener) and in `hello`.
 """
 
 from __future__ import annotations
@@ -29,13 +37,24 @@ from ..codec import DatagramDecoder, FrameCodec
 from ..link.client import CommandResult, StageRecord
 from ..link.intake import TelemetryIntake
 from ..link.stats import LinkStatistics
-from . import wire
+from . import schema, wire
 from .abort import send_abort
 from .endpoints import FanoutError, ReadOnlyConsole, parse_endpoint, read_only_message
 
 log = logging.getLogger(__name__)
 
 RCVHWM = 10000
+#: bad messages in a row after which the watch is 'lost': the stream no longer makes
+#: sense (a genuine publisher sends none; a hello alone comes twice a second)
+BAD_IN_A_ROW = 20
+#: the largest jump of the message sequence counted as missed messages: ~2.5 h of a
+#: publisher's ~110 messages a second.  A viewer misses messages only while it is
+#: stalled (the publisher drops them at its high-water mark), never that many; a larger
+#: jump (or one backwards: a restarted publisher) is a resynchronisation.
+MAX_SEQUENCE_GAP = 1_000_000
+#: messages handled before the reader looks at its clock again, so that a flood of
+#: messages cannot keep the watchdog from running
+DRAIN_BATCH = 1000
 
 
 @dataclass
@@ -44,6 +63,7 @@ class FanoutCounters:
     messages: int = 0
     missed_messages: int = 0
     bad_messages: int = 0
+    message_resyncs: int = 0
     recent_errors: deque = field(default_factory=lambda: deque(maxlen=16))
 
     def as_dict(self) -> dict[str, int]:
@@ -81,7 +101,12 @@ class WatchClient:
         self._instance: str | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._last_message = 0.0
+        self._last_valid = 0.0
+        self._bad_in_a_row = 0
+        #: why the reader thread stopped on its own (None while it runs or stopped as asked)
+        self.failure: str | None = None
+        #: set at the first hello and when the reader ends: wait_up waits on it
+        self._wake = threading.Event()
 
     # ------------------------------------------------------------------ contract
     def subscribe(self, callback: Callable) -> None:
@@ -140,6 +165,8 @@ class WatchClient:
         sock = ctx.socket(zmq.SUB)
         sock.rcvhwm = self.rcvhwm
         sock.linger = 0
+        # a part larger than this is never buffered: ZeroMQ drops that connection
+        sock.maxmsgsize = schema.ZMQ_MAX_PART_BYTES
         if self.rcvbuf is not None:          # the kernel's buffer (tests: a small one)
             sock.rcvbuf = self.rcvbuf
         try:
@@ -158,16 +185,25 @@ class WatchClient:
         self._thread.start()
         return self
 
+    @property
+    def ended(self) -> bool:
+        """The reader thread has stopped (closed, or failed: see `failure`)."""
+        return self._thread is not None and not self._thread.is_alive()
+
     def wait_up(self, timeout: float = 5.0) -> "WatchClient":
-        """Wait until the publisher's first hello (its device address) has arrived."""
-        deadline = time.monotonic() + timeout
-        while not self.hello and time.monotonic() < deadline and not self._stop.is_set():
-            time.sleep(0.02)
+        """Wait until the publisher's first valid hello (its device address) has arrived."""
+        self._wake.wait(timeout)
+        if self.failure is not None:
+            raise FanoutError(f"stopped watching {self.endpoint}: {self.failure}")
         if not self.hello:
             keys = (" with these CURVE keys (is this console's public key in the "
                     "publisher's authorized/ folder?)" if self.curve_keys else "")
+            bad = self.counters.bad_messages
+            junk = (f" ({bad} message(s) arrived that this console refused, the last: "
+                    f"{self.counters.recent_errors[-1]} - is another program bound there?)"
+                    if bad and self.counters.recent_errors else "")
             raise FanoutError(f"no station publishes on {self.endpoint}{keys} within "
-                              f"{timeout:g} s - start the commanding station with "
+                              f"{timeout:g} s{junk} - start the commanding station with "
                               f"--publish {self.endpoint}")
         return self
 
@@ -177,34 +213,55 @@ class WatchClient:
         try:
             while not self._stop.is_set():
                 if sock.poll(100, zmq.POLLIN):
-                    while True:           # everything queued, then look at the clock again
+                    for _ in range(DRAIN_BATCH):     # what is queued, a bounded number
                         try:
                             parts = sock.recv_multipart(zmq.NOBLOCK)
                         except zmq.Again:
                             break
                         self._on_parts(parts)
-                elif (self.link_state == "up"
-                      and time.monotonic() - self._last_message > self.silence_s):
-                    self._set_state("lost", f"no word from the publisher at {self.endpoint} "
-                                            f"for {self.silence_s:g} s - still listening")
+                self._watchdog()
+        except BaseException as exc:     # noqa: BLE001 - the watch must never end silently
+            self._fail(exc)
         finally:
             sock.close(linger=0)
             ctx.term()
+            self._wake.set()
+
+    def _watchdog(self) -> None:
+        """'lost' when nothing valid arrived for silence_s (whatever else did)."""
+        if self.link_state == "up" and time.monotonic() - self._last_valid > self.silence_s:
+            bad = f" ({self._bad_in_a_row} refused meanwhile)" if self._bad_in_a_row else ""
+            self._set_state("lost", f"nothing valid from the publisher at {self.endpoint} for "
+                                    f"{self.silence_s:g} s{bad} - still listening")
+
+    def _fail(self, exc: BaseException) -> None:
+        """The reader thread stops on an error nothing foresaw: said, never silent."""
+        self.failure = f"the reader stopped on {type(exc).__name__}: {str(exc)[:200]}"
+        log.error("watching %s: %s", self.endpoint, self.failure)
+        log.debug("watching %s: the reader's error", self.endpoint, exc_info=True)
+        self._set_state("failed", f"{self.failure} - this console no longer watches "
+                                  f"{self.endpoint}; start it again")
+
+    def _bad(self, reason: str) -> None:
+        """A message refused: counted, its reason kept; too many in a row is 'lost'."""
+        self.counters.bad_messages += 1
+        self.counters.recent_errors.append(FanoutError(f"refused a message: {reason}"))
+        self._bad_in_a_row += 1
+        if self._bad_in_a_row == BAD_IN_A_ROW and self.link_state in ("up", "connecting"):
+            self._set_state("lost", f"{BAD_IN_A_ROW} messages in a row from {self.endpoint} "
+                                    f"that this console refused (the last: {reason}) - is "
+                                    f"another program bound there? still listening")
 
     def _on_parts(self, parts: list[bytes]) -> None:
-        self._last_message = time.monotonic()
         try:
             msg = wire.parse(parts)
-        except (wire.WireError, ValueError) as exc:
-            self.counters.bad_messages += 1
-            self.counters.recent_errors.append(FanoutError(str(exc)))
+        except wire.WireError as exc:
+            self._bad(str(exc))
             return
-        self.counters.messages += 1
-        if self._expected is not None and msg.sequence > self._expected:
-            self.counters.missed_messages += msg.sequence - self._expected
-        self._expected = msg.sequence + 1       # lower: the publisher restarted
-        if self.link_state != "up":
-            self._set_state("up", self.endpoint)
+        except Exception as exc:           # noqa: BLE001 - parse should raise WireError only
+            log.debug("parsing a fan-out message", exc_info=True)
+            self._bad(f"{type(exc).__name__}: {str(exc)[:200]}")
+            return
         try:
             if msg.topic == wire.TOPIC_FRAMES:
                 self._on_frames(msg)
@@ -213,9 +270,33 @@ class WatchClient:
             elif msg.topic == wire.TOPIC_COMMAND:
                 self._on_command(msg.record)
             elif msg.topic == wire.TOPIC_LINK:
-                self._remote(str(msg.record.get("state")), str(msg.record.get("message", "")))
-        except Exception:                  # a listener's bug must not stop the console
-            log.exception("handling a %s message", msg.topic.decode())
+                self._remote(msg.record["state"], msg.record["message"])
+        except Exception as exc:           # noqa: BLE001 - checked, yet not decodable here
+            log.debug("handling a %s message", msg.topic.decode(), exc_info=True)
+            self._bad(f"a {msg.topic.decode()} message this console could not handle: "
+                      f"{type(exc).__name__}: {str(exc)[:200]}")
+            return
+        self._sequence(msg.sequence)
+        self.counters.messages += 1
+        self._bad_in_a_row = 0
+        self._last_valid = time.monotonic()
+        if self.link_state != "up":
+            self._set_state("up", self.endpoint)
+
+    def _sequence(self, seq: int) -> None:
+        """Missed messages from the gaps of the message sequence, within reason."""
+        expected, self._expected = self._expected, seq + 1
+        if expected is None or seq == expected:
+            return
+        if expected < seq <= expected + MAX_SEQUENCE_GAP:
+            self.counters.missed_messages += seq - expected
+            return
+        self.counters.message_resyncs += 1
+        how = (f"jumped by {seq - expected}, more than the {MAX_SEQUENCE_GAP} a stall can "
+               f"miss" if seq > expected else "went back (a restarted publisher?)")
+        self.counters.recent_errors.append(FanoutError(
+            f"the message sequence {how}: {expected} expected, {seq} received - counted as a "
+            f"resynchronisation, not as missed messages"))
 
     def _on_frames(self, msg: wire.Message) -> None:
         blocks = self.intake.blocks(self._decoder.decode(msg.chunks, msg.times), "stream")
@@ -237,18 +318,17 @@ class WatchClient:
                     f"here with this console's dictionary (logs keep the raw frames)")
             self.counters.recent_errors.append(FanoutError(text))
             log.warning("%s", text)
-        if record.get("instance") != self._instance and self._instance is not None:
+        if record["instance"] != self._instance and self._instance is not None:
             self._remote("restarted", "the commanding station started publishing again")
-        self._instance = record.get("instance")
+        self._instance = record["instance"]
         self.hello = record
+        self._wake.set()
 
     def _on_command(self, record: dict[str, Any]) -> None:
-        stages = [StageRecord(**{k: s.get(k) for k in ("stage", "reason", "host_time",
-                                                         "device_tick")})
-                  for s in record.get("stages", [])]
-        result = CommandResult(str(record.get("name")), int(record.get("sequence", 0)),
-                               dict(record.get("arguments", {})), stages,
-                               dict(record.get("reply", {})), int(record.get("retries", 0)))
+        """`record` as schema.command checked it."""
+        stages = [StageRecord(**s) for s in record["stages"]]
+        result = CommandResult(record["name"], record["sequence"], record["arguments"], stages,
+                               record["reply"], record["retries"])
         self._notify_command(result)
 
     def _notify_command(self, result: CommandResult) -> None:

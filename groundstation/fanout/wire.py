@@ -23,9 +23,12 @@ the frames' own sequence numbers (link/stats.py).  Standard library only.
 from __future__ import annotations
 
 import json
+import math
 import struct
 from dataclasses import dataclass
 from typing import Any
+
+from . import schema
 
 MAGIC = b"GSFO"
 WIRE_VERSION = 1
@@ -88,10 +91,19 @@ def _plain(value: Any) -> Any:
     return str(value)
 
 
+_SCHEMAS = {TOPIC_HELLO: schema.hello, TOPIC_COMMAND: schema.command, TOPIC_LINK: schema.link}
+
+
 def parse(parts: list[bytes]) -> Message:
-    """A received multipart message -> Message; WireError if it is not ours."""
-    if len(parts) < 3 or len(parts[1]) != HEADER.size:
+    """A received multipart message -> Message; WireError if it is not ours, or not
+    within the limits and schema a console accepts (schema.py).  Never anything else:
+    whatever the bytes, the caller gets a Message whose fields have their types."""
+    if len(parts) not in (3, 4) or len(parts[1]) != HEADER.size:
         raise WireError(f"a message of {len(parts)} part(s) that is not a fan-out message")
+    size = sum(len(p) for p in parts)
+    if size > schema.MAX_MESSAGE_BYTES:
+        raise WireError(f"a message of {size} bytes, above the {schema.MAX_MESSAGE_BYTES} a "
+                        f"console accepts")
     magic, version, kind, seq, host_time, tick = HEADER.unpack(parts[1])
     if magic != MAGIC:
         raise WireError("a message without the fan-out magic (another program on this port?)")
@@ -101,16 +113,44 @@ def parse(parts: list[bytes]) -> Message:
     topic = TOPICS.get(kind)
     if topic is None or topic != parts[0]:
         raise WireError(f"unknown fan-out message kind {kind}")
+    if not math.isfinite(host_time):
+        raise WireError(f"a {topic.decode()} message with host time {host_time}")
     device_tick = None if tick == NO_TICK else tick
     if topic != TOPIC_FRAMES:
-        return Message(topic, seq, host_time, device_tick, record=json.loads(parts[2]))
+        if len(parts) != 3:
+            raise WireError(f"a {topic.decode()} message of {len(parts)} parts, not 3")
+        return Message(topic, seq, host_time, device_tick, record=_record(topic, parts[2]))
     if len(parts) != 4 or len(parts[2]) % INDEX.size:
         raise WireError("a frames message with a damaged index")
+    if len(parts[2]) // INDEX.size > schema.MAX_CHUNKS:
+        raise WireError(f"a frames message of {len(parts[2]) // INDEX.size} chunks, above "
+                        f"{schema.MAX_CHUNKS}")
     data, chunks, times, at = parts[3], [], [], 0
     for length, when in INDEX.iter_unpack(parts[2]):
+        if not math.isfinite(when):
+            raise WireError(f"a frames message with arrival time {when}")
         chunks.append(data[at:at + length])
         times.append(when)
         at += length
     if at != len(data):
         raise WireError(f"a frames message whose index covers {at} of {len(data)} bytes")
     return Message(topic, seq, host_time, device_tick, chunks=chunks, times=times)
+
+
+def _record(topic: bytes, body: bytes) -> Any:
+    """The checked record of a JSON kind: size, then nesting (before json.loads, whose
+    parser recurses per level), then the kind's schema."""
+    what = topic.decode()
+    if len(body) > schema.MAX_JSON_BYTES:
+        raise WireError(f"a {what} message of {len(body)} bytes of JSON, above "
+                        f"{schema.MAX_JSON_BYTES}")
+    if schema.json_depth(body) > schema.MAX_JSON_DEPTH:
+        raise WireError(f"a {what} message nested deeper than {schema.MAX_JSON_DEPTH} levels")
+    try:
+        record = json.loads(body)
+    except (ValueError, RecursionError) as exc:   # UnicodeDecodeError is a ValueError
+        raise WireError(f"a {what} message that is not JSON ({str(exc)[:120]})") from None
+    try:
+        return _SCHEMAS[topic](record)
+    except schema.SchemaError as exc:
+        raise WireError(f"a {what} message: {exc}") from None
