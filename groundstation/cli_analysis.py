@@ -287,7 +287,7 @@ def _cmd_batch(args) -> int:
     if args.serial and args.scheduler not in (None, "none"):
         print(f"error: --serial and --scheduler {args.scheduler}: choose one", file=sys.stderr)
         return 2
-    from .analysis.batch import (TABLE_KEYS, BatchOptions, campaign_index, default_workers,
+    from .analysis.batch import (TABLE_KEYS, BatchOptions, campaign_reports, default_workers,
                                  find_logs, run_serial)
     from .analysis.batch_table import write_table
     from .plant.testbed import load_testbed
@@ -307,7 +307,9 @@ def _cmd_batch(args) -> int:
                            args.design if args.design == "auto" else str(Path(args.design).absolute()),
                            **({} if args.max_excluded_fraction is None else
                               {"max_excluded_fraction": args.max_excluded_fraction}))
-    known = campaign_index(paths)
+    known, skipped = campaign_reports(paths)
+    for report, why in skipped:            # a stray .json beside the logs costs a note
+        print(f"note: skipped {report}: {why}", file=sys.stderr)
     progress = _ProgressBar(len(paths))
     if scheduler == "none":
         rows = run_serial(paths, options, known, progress)

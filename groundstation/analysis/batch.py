@@ -82,30 +82,81 @@ def find_logs(patterns: Iterable[str | Path]) -> list[Path]:
 
 
 def campaign_index(paths: Iterable[Path]) -> dict[str, dict[str, Any]]:
-    """{log path: {campaign, campaign_run, design, base_motion, seed}} from the campaign
-    reports (`campaign run` writes report.json beside its logs) in the logs' folders.
+    """{log path: {campaign, campaign_run, design, base_motion, seed}}: campaign_reports()
+    without the files it skipped."""
+    return campaign_reports(paths)[0]
+
+
+def campaign_reports(paths: Iterable[Path]
+                     ) -> tuple[dict[str, dict[str, Any]], list[tuple[Path, str]]]:
+    """({log path: {campaign, campaign_run, design, base_motion, seed}}, skipped) from the
+    campaign reports (`campaign run` writes report.json beside its logs) in the logs'
+    folders; `skipped` is each other .json file there with why it is not a report, for
+    the caller to note (a folder of logs holds other JSON too - exports, notes, tools').
 
     A log does not record which campaign it belongs to, nor the matrix values of its run;
     the report does.  Read once in the driver, passed to each task (a few hundred bytes)."""
     index: dict[str, dict[str, Any]] = {}
+    skipped: list[tuple[Path, str]] = []
     for folder in sorted({Path(p).parent for p in paths}):
         for report in sorted(folder.glob("*.json")):
             try:
-                data = json.loads(report.read_text())
-            except (OSError, ValueError):
-                continue                                 # not a report of ours
-            if not isinstance(data, dict) or not isinstance(data.get("recordings"), list):
+                entries = _report_entries(report)
+            except _NotAReport as exc:
+                skipped.append((report, str(exc)))
                 continue
-            for rec in data["recordings"]:
-                v = rec.get("variables") or {}
-                ident = {"campaign": str(data.get("campaign", "")), "campaign_run": rec.get("run"),
-                         "design": v.get("design_stem", v.get("design")),
-                         "base_motion": v.get("base_motion_stem", v.get("base_motion")),
-                         "seed": v.get("seed")}
-                for f in rec.get("files", []):
-                    # a report lists where the log was written; the folder may have moved
-                    index[str(folder / Path(f).name)] = ident
-    return index
+            for name, ident in entries:
+                # a report lists where the log was written; the folder may have moved
+                index[str(folder / name)] = ident
+    return index, skipped
+
+
+class _NotAReport(Exception):
+    """A .json file beside the logs that is not a campaign report (the message says why)."""
+
+
+def _report_entries(report: Path) -> list[tuple[str, dict[str, Any]]]:
+    """(log file name, identity) of each log a campaign report lists; _NotAReport if the
+    file is not one.  The layout is campaign/report.py's CampaignReport (asdict): this
+    checks the fields read here, with their types, since anything may sit in a folder
+    of logs.  (The analysis package does not import campaign/: campaign imports it.)"""
+    try:
+        data = json.loads(report.read_text())
+    except OSError as exc:
+        raise _NotAReport(f"cannot be read ({exc.strerror or exc})") from None
+    except (ValueError, RecursionError) as exc:     # not UTF-8, not JSON, absurdly nested
+        raise _NotAReport(f"not JSON ({str(exc)[:80]})") from None
+    if not isinstance(data, dict):
+        raise _NotAReport(f"a JSON {type(data).__name__}, not a campaign report's object")
+    missing = [k for k in ("campaign", "file", "started", "recordings") if k not in data]
+    if missing:
+        raise _NotAReport(f"no {', '.join(repr(k) for k in missing)}: not a campaign report")
+    if not isinstance(data["campaign"], str) or not isinstance(data["recordings"], list):
+        raise _NotAReport("'campaign' is not text or 'recordings' not a list: not a campaign "
+                          "report")
+    entries = []
+    for i, rec in enumerate(data["recordings"], 1):
+        files = rec.get("files", []) if isinstance(rec, dict) else None
+        variables = (rec.get("variables") or {}) if isinstance(rec, dict) else None
+        run = rec.get("run") if isinstance(rec, dict) else None
+        if (not isinstance(files, list) or not all(isinstance(f, str) for f in files)
+                or not isinstance(variables, dict)
+                or not (run is None or isinstance(run, int) and not isinstance(run, bool))):
+            raise _NotAReport(f"recording {i} is not a campaign report's (a run number, "
+                              f"its files' names, its variables)")
+        v = variables
+        seed = v.get("seed")
+        ident = {"campaign": data["campaign"], "campaign_run": run,
+                 "design": _text_or_none(v.get("design_stem", v.get("design"))),
+                 "base_motion": _text_or_none(v.get("base_motion_stem", v.get("base_motion"))),
+                 "seed": seed if isinstance(seed, int) and not isinstance(seed, bool) else None}
+        entries += [(Path(f).name, ident) for f in files]
+    return entries
+
+
+def _text_or_none(value: Any) -> str | None:
+    """A matrix value as the table's text column holds it (a report's value is a name)."""
+    return None if value is None else str(value)
 
 
 # ------------------------------------------------------------------------ one log
@@ -226,4 +277,5 @@ def default_workers() -> int:
 
 
 __all__ = ["BatchOptions", "IDENTITY_KEYS", "TABLE_KEYS", "analyze_one", "campaign_index",
-           "default_workers", "error_row", "find_logs", "run_identity", "run_serial"]
+           "campaign_reports", "default_workers", "error_row", "find_logs", "run_identity",
+           "run_serial"]
