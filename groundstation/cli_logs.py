@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 from pathlib import Path
 
@@ -110,7 +112,15 @@ def _cmd_log(args) -> int:
     if args.action == "check":
         from .logs.check import check_log
         result = check_log(args.file)
-        print(result.format())
+        try:
+            print(result.format(), flush=True)
+        except BrokenPipeError:
+            # the output's reader left (`log check F | head -1`): the verdict is the exit
+            # status all the same (main() would make it 0); the rest of the output goes
+            # nowhere, so that Python's flush at exit does not fail on the closed pipe
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.close(devnull)
         return result.exit_code
     if args.action == "info":
         with LogReader(args.file) as r:

@@ -54,15 +54,17 @@ def log(dictionary, tmp_path_factory):
 
 # ---------------------------------------------------------------------- one way to open
 def test_reader_check_and_replay_open_the_file_the_same_way(log, monkeypatch):
+    """Read-only, SWMR, without the file lock (opening.py opens with HDF5's low-level
+    call, to bound SWMR's metadata read attempts on the file-access properties)."""
     opened = []
-    real = h5py.File
+    real = h5py.h5f.open
 
-    def spy(*args, **kwargs):
-        opened.append((args[1] if len(args) > 1 else kwargs.get("mode"), kwargs.get("swmr"),
-                       kwargs.get("locking")))
-        return real(*args, **kwargs)
+    def spy(name, flags, fapl=None, **kwargs):
+        opened.append((flags == h5py.h5f.ACC_RDONLY | h5py.h5f.ACC_SWMR_READ,
+                       fapl.get_file_locking()[0]))
+        return real(name, flags, fapl=fapl, **kwargs)
 
-    monkeypatch.setattr(h5py, "File", spy)
+    monkeypatch.setattr(h5py.h5f, "open", spy)
     with LogReader(log) as r:
         assert r.n_frames("HIGH_RATE") > 0
     assert sum(1 for _ in iter_blocks(log)) > 0
@@ -71,7 +73,7 @@ def test_reader_check_and_replay_open_the_file_the_same_way(log, monkeypatch):
         assert src.wait_finished(30)
     from groundstation.logs.check import check_log
     assert check_log(log).status == "intact"
-    assert opened and set(opened) == {("r", True, False)}
+    assert opened and set(opened) == {(True, False)}
 
 
 def test_readers_hold_no_lock_that_would_stop_the_recorders_final_reopen(log):

@@ -19,6 +19,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from .opening import superblock_eof, truncated_advice
 from .reader import (H5_READ_ERRORS, LogDamagedError, LogFormatError, LogReader,
                      truncation_text)
 
@@ -53,6 +54,7 @@ class LogCheck:
     packets: list[PacketCheck] = field(default_factory=list)
     journal: tuple[int, int] = (0, 0)                      # records readable, recorded
     journal_damage: list[DatasetDamage] = field(default_factory=list)
+    advice: str = ""             # what to do with an unreadable log, when there is more to say
 
     @property
     def exit_code(self) -> int:
@@ -82,6 +84,8 @@ class LogCheck:
                          f"{'' if ok == total and not self.journal_damage else '  DAMAGED'}")
             for d in self.journal_damage[:_SHOWN_PER_PACKET]:
                 lines.append(f"      {d.path} unreadable after row {d.first_bad} of {d.rows} ({d.error})")
+        if self.status == UNREADABLE and self.advice:
+            lines.append(f"  {self.advice}")
         if self.status == DAMAGED:
             lines.append(f"  export the readable part: groundstation log export {self.path} "
                          f"--salvage [--packet NAME]")
@@ -153,7 +157,10 @@ def check_log(path: str | Path) -> LogCheck:
     try:
         r = LogReader(path, salvage=True)
     except LogDamagedError as exc:
-        return LogCheck(path, UNREADABLE, [exc.what])
+        # of a truncated log, say how much is there and where the rest must come from
+        expected, size = superblock_eof(path), path.stat().st_size
+        advice = truncated_advice(size, expected) if expected and expected > size else ""
+        return LogCheck(path, UNREADABLE, [exc.what], advice=advice)
     except LogFormatError as exc:          # not HDF5 at all, or not a ground-station log
         return LogCheck(path, UNREADABLE, [str(exc)])
     with r:
@@ -190,6 +197,8 @@ def check_log(path: str | Path) -> LogCheck:
                    or any(p.damage or p.readable < p.frames for p in result.packets))
         readable = (any(p.readable for p in result.packets) or result.journal[0])
         result.status = INTACT if not damaged else DAMAGED if readable else UNREADABLE
+        if result.status == UNREADABLE and r.truncated is not None:
+            result.advice = truncated_advice(*r.truncated)
         return result
 
 

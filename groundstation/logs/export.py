@@ -27,7 +27,8 @@ from typing import Iterable
 import numpy as np
 
 from .atomic import atomic_output
-from .reader import Channel, EmptyRangeError, LogDamagedError, LogError, LogQueryError, LogReader
+from .reader import (Channel, EmptyRangeError, LogDamagedError, LogError, LogQueryError, LogReader,
+                     truncation_text)
 
 _FLOAT_FMT = "%.17g"
 MATLAB_NAME_MAX = 63
@@ -115,8 +116,12 @@ def _plan(reader: LogReader, packet: str, channels, start, stop, timebase: str, 
         i0, i1 = _rows(reader, packet, start, stop, timebase, relative)
         return chans, i0, i1, i1 - i0, ""
     if limit == 0:
-        raise LogDamagedError(reader.path, f"no {packet} frame is readable: {what}",
-                              salvageable=False)
+        # other packets or the journal may still read: say where to look, not "nothing"
+        cut = f"; the file is {truncation_text(*reader.truncated)}" if reader.truncated else ""
+        raise LogDamagedError(
+            reader.path, f"no {packet} frame is readable: {what}{cut}", salvageable=False,
+            advice=(f"`groundstation log check {reader.path}` says which packets still have "
+                    f"readable frames (export one of them with --packet NAME)"))
     last = float(reader.read_rows(packet, [], limit - 1, limit)["device_time"][0])
     damage = (f"the log is damaged after {packet} frame {limit} of {n} (device time "
               f"{last:.4f} s): {what}")

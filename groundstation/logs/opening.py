@@ -21,16 +21,34 @@ How a reader opens the file (`open_h5`)
     needs no lock.  HDF5 refuses to open a file twice in one process with different
     locking flags; when this process already has it open with the lock (a `LogFile`
     written in-process, as tests and scripts do) the reader opens it with the lock too.
+
+    metadata read attempts = SWMR_METADATA_READ_ATTEMPTS: in SWMR read mode HDF5 takes
+    a metadata block whose checksum does not match for one a writer is rewriting at
+    that moment, and reads it again, sleeping 1, 2, 4, ... ns between attempts - by
+    default 100 attempts, 2^100 ns: for ever, inside one C call, deaf to Ctrl-C.  A
+    truncated or overwritten log has such blocks for good (past the cut HDF5 reads
+    zeros), so `log check`, `log info` or `export --salvage` hung on the first one they
+    touched (issue 29).  The attempts are bounded here, on the file-access property list
+    (H5Pset_metadata_read_attempts, which h5py does not wrap: it is called from the
+    HDF5 library h5py itself is linked to).  The bound still rides out a writer's
+    rewrite (a few ms); a block that stays wrong then fails as any unreadable block
+    does, and the callers say what is damaged.  Where the call is not available (a
+    platform whose loader cannot find it), a log no writer has open is opened without
+    SWMR (one read attempt, as HDF5 does outside SWMR; a truncated file is then refused
+    at opening, which HDF5 checks only outside SWMR).
 """
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import os
 from pathlib import Path
 from typing import Any
 
 import h5py
 import numpy as np
+from h5py import h5f, h5p
 
 from ..errors import GroundStationError
 from . import schema
@@ -58,18 +76,21 @@ class LogDamagedError(LogFormatError):
     destroyed, truncated, or a dataset / attribute that HDF5 cannot read any more.
 
     `what` names the damage; the message adds the file and what to do about it
-    (`groundstation log check`, and `log export --salvage` when something is readable)."""
+    (`groundstation log check`, and `log export --salvage` when something is readable;
+    `advice` replaces that where the caller knows better)."""
 
-    def __init__(self, path: str | Path, what: str, *, salvageable: bool = True):
+    def __init__(self, path: str | Path, what: str, *, salvageable: bool = True,
+                 advice: str | None = None):
         self.path = Path(path)
         self.what = what
         self.salvageable = salvageable
-        if salvageable:
+        if advice is None and salvageable:
             advice = (f"run `groundstation log check {self.path}` to see what is readable, and "
                       f"`groundstation log export {self.path} --salvage` to export it")
-        else:
+        elif advice is None:
             advice = (f"nothing in it can be read (`groundstation log check {self.path}` "
                       f"says what was found)")
+        self.advice = advice
         super().__init__(f"{self.path}: damaged log, {what}; {advice}")
 
 
@@ -95,6 +116,14 @@ def truncation_text(actual: int, expected: int) -> str:
     return f"truncated: file ends at byte {actual}, HDF5 expects {expected}"
 
 
+def truncated_advice(actual: int, expected: int) -> str:
+    """What to do with a truncated log of which nothing can be read: only its source
+    has the rest."""
+    return (f"nothing in it can be read, and only {actual} of its {expected} bytes "
+            f"({100 * actual // max(1, expected)} %) are there: copy the log again from "
+            f"where it came from")
+
+
 def file_truncation(f: h5py.File, path: Path) -> tuple[int, int] | None:
     """(bytes on disk, bytes HDF5 expects) if the file is shorter than its superblock's
     end-of-file address says, else None.  HDF5 itself refuses such a file in normal read
@@ -109,7 +138,7 @@ def file_truncation(f: h5py.File, path: Path) -> tuple[int, int] | None:
     return (actual, expected) if expected > actual else None
 
 
-def _superblock_eof(path: Path) -> int | None:
+def superblock_eof(path: Path) -> int | None:
     """End-of-file address from a version 2/3 superblock at offset 0 (the format our
     logs use), for when HDF5 cannot open the file to say it: signature (8 bytes),
     version, sizes of offsets and lengths, flags, then base, extension and EOF addresses."""
@@ -171,14 +200,76 @@ def unreadable_text(ds: h5py.Dataset, row: int, exc: BaseException) -> str:
 
 
 # ---------------------------------------------------------------------- opening
-def open_h5(path: Path) -> h5py.File:
-    """The file opened for reading: SWMR, without HDF5's file lock (module docstring)."""
+#: SWMR read: reads of a metadata block whose checksum does not match before HDF5 gives
+#: up on it (module docstring).  The sleeps between them double from 1 ns, so 24
+#: attempts wait up to 2^24 ns = 17 ms in all (measured: 20 ms) - far longer than a
+#: writer takes to rewrite a block, and a damaged log with a few hundred bad blocks
+#: still answers in seconds.
+SWMR_METADATA_READ_ATTEMPTS = 24
+
+
+@functools.lru_cache(maxsize=1)
+def _set_metadata_read_attempts():
+    """HDF5's H5Pset_metadata_read_attempts from the library h5py is linked to, or None.
+
+    It is looked up through h5py's own extension module: the dynamic loader then
+    searches that module's dependencies, so the function found belongs to the very
+    HDF5 library (and the same property-list ids) h5py uses - never another copy of
+    HDF5 that happens to be installed."""
     try:
-        return h5py.File(path, "r", libver="latest", swmr=True, locking=False)
+        from h5py import defs
+        fn = ctypes.CDLL(defs.__file__).H5Pset_metadata_read_attempts
+    except (OSError, AttributeError, ImportError):
+        return None
+    fn.argtypes = [ctypes.c_int64, ctypes.c_uint]       # hid_t is 64-bit since HDF5 1.10
+    fn.restype = ctypes.c_int
+    return fn
+
+
+def _writer_flags(path: Path) -> int | None:
+    """The file-consistency flags of a version 3 superblock (byte 11): bit 0 a writer
+    has the file open, bit 2 for SWMR writing; None for another superblock."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(12)
+    except OSError:
+        return None
+    if len(head) < 12 or head[:8] != b"\x89HDF\r\n\x1a\n" or head[8] != 3:
+        return None
+    return head[11]
+
+
+def _fapl(locking: bool) -> tuple[h5p.PropFAID, bool]:
+    """File-access properties of a read: latest format, HDF5's file lock or not, and
+    the bounded metadata read attempts; and whether the bound could be set."""
+    fapl = h5p.create(h5p.FILE_ACCESS)
+    fapl.set_libver_bounds(h5f.LIBVER_LATEST, h5f.LIBVER_LATEST)
+    if not locking:
+        fapl.set_file_locking(False, ignore_when_disabled=False)
+    setter = _set_metadata_read_attempts()
+    bounded = setter is not None and setter(fapl.id, SWMR_METADATA_READ_ATTEMPTS) >= 0
+    return fapl, bounded
+
+
+def _open(path: Path, locking: bool) -> h5py.File:
+    fapl, bounded = _fapl(locking)
+    flags = h5f.ACC_RDONLY | h5f.ACC_SWMR_READ
+    if not bounded and not (_writer_flags(path) or 0) & 0x5:
+        # no bound on SWMR's retries, and no writer that needs SWMR: a plain read tries
+        # every metadata block once (module docstring)
+        flags = h5f.ACC_RDONLY
+    return h5py.File(h5f.open(os.fsencode(path), flags, fapl=fapl))
+
+
+def open_h5(path: Path) -> h5py.File:
+    """The file opened for reading: SWMR, without HDF5's file lock, with bounded
+    metadata read attempts (module docstring)."""
+    try:
+        return _open(path, locking=False)
     except OSError as exc:
         if "locking" not in str(exc):
             raise
-    return h5py.File(path, "r", libver="latest", swmr=True)
+    return _open(path, locking=True)
 
 
 def open_log_file(path: Path, *, salvage: bool = False) -> tuple[h5py.File, tuple[int, int] | None]:
@@ -214,10 +305,11 @@ def open_log_file(path: Path, *, salvage: bool = False) -> tuple[h5py.File, tupl
     try:
         f = open_h5(path)
     except H5_READ_ERRORS as exc:
-        expected = _superblock_eof(path)
+        expected = superblock_eof(path)
         if expected is not None and expected > size:
             raise LogDamagedError(path, truncation_text(size, expected) + " and what is left "
-                                  f"cannot be opened ({exc})", salvageable=False) from None
+                                  f"cannot be opened ({exc})", salvageable=False,
+                                  advice=truncated_advice(size, expected)) from None
         raise LogDamagedError(path, f"the HDF5 file cannot be opened ({exc})",
                               salvageable=False) from None
     cut = file_truncation(f, path)
@@ -264,4 +356,4 @@ def check_layout(f: h5py.File, path: Path) -> int:
 
 __all__ = ["EmptyRangeError", "H5_READ_ERRORS", "LogDamagedError", "LogError", "LogFormatError",
            "LogQueryError", "attr_text", "check_layout", "file_truncation", "first_unreadable",
-           "open_h5", "open_log_file", "truncation_text", "unreadable_text"]
+           "open_h5", "open_log_file", "superblock_eof", "truncated_advice", "truncation_text", "unreadable_text"]

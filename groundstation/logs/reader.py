@@ -37,7 +37,7 @@ from .channels import to_engineering as _to_engineering
 # the names below were defined here before the split; callers still import them from here
 from .opening import (H5_READ_ERRORS, EmptyRangeError, LogDamagedError, LogError, LogFormatError,
                       LogQueryError, check_layout, file_truncation, first_unreadable,
-                      open_log_file, truncation_text, unreadable_text)
+                      open_log_file, truncated_advice, truncation_text, unreadable_text)
 from .opening import attr_text as _text
 from .rows import search_sorted as _search
 from .summary import LogInfo, PacketSummary, scan_sequence, summarize
@@ -97,9 +97,12 @@ class LogReader:
 
     # ------------------------------------------------------------------ damage
     def _damaged(self, what: str, *, salvageable: bool = True) -> LogDamagedError:
+        advice = None
         if self.truncated is not None:
             what = f"{what}; the file is {truncation_text(*self.truncated)}"
-        return LogDamagedError(self.path, what, salvageable=salvageable)
+            if not salvageable:
+                advice = truncated_advice(*self.truncated)
+        return LogDamagedError(self.path, what, salvageable=salvageable, advice=advice)
 
     def _read(self, path: str, sel) -> np.ndarray:
         """ds[sel] of the dataset at `path`; LogDamagedError naming the dataset and the
