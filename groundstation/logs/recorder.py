@@ -15,13 +15,14 @@ import contextlib
 import errno
 import logging
 import multiprocessing as mp
+import os
 import queue
 import shutil
 import signal
 import tempfile
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any, Callable
@@ -38,6 +39,8 @@ from .writer import writer_main
 log = logging.getLogger(__name__)
 
 DEFAULT_TEMPLATE = "{date}_{time}_{test}_run{run:03d}.h5"
+#: run numbers tried for a free file name before giving up
+MAX_RUNS = 10000
 
 
 class RecorderError(GroundStationError):
@@ -53,22 +56,73 @@ class RecorderStatus:
     error: str
     discarded_blocks: int       # blocks that could not be queued (writer too slow or failed)
     files: list[Path]
+    removed: list[Path] = field(default_factory=list)   # files of a recording that got nothing
+    note: str = ""              # what the operator should know of the files (their removal)
+
+
+def _file_name(template: str, test_name: str, run: int, now: datetime) -> str:
+    safe = "".join(c if c.isalnum() or c in "-_" else "-" for c in test_name) or "test"
+    return template.format(date=now.strftime("%Y%m%d"), time=now.strftime("%H%M%S"),
+                           test=safe, run=run)
 
 
 def log_path(folder: str | Path, test_name: str = "test", template: str = DEFAULT_TEMPLATE,
              run: int | None = None) -> tuple[Path, int]:
-    """The next free file name from the template; the run number counts up from 1."""
+    """The next file name from the template that is free at this moment (the run number
+    counts up from 1).  Only a proposal: another program may take the name a moment
+    later - a recording takes its file with reserve_log_path(), which creates it."""
     folder = Path(folder)
     now = datetime.now()
-    safe = "".join(c if c.isalnum() or c in "-_" else "-" for c in test_name) or "test"
     start = run or 1
-    for n in range(start, start + 10000):
-        name = template.format(date=now.strftime("%Y%m%d"), time=now.strftime("%H%M%S"),
-                               test=safe, run=n)
-        path = folder / name
+    for n in range(start, start + MAX_RUNS):
+        path = folder / _file_name(template, test_name, n, now)
         if not path.exists():
             return path, n
     raise RecorderError(f"no free file name for '{template}' in {folder}")
+
+
+def reserve_log_path(folder: str | Path, test_name: str = "test",
+                     template: str = DEFAULT_TEMPLATE, run: int | None = None,
+                     now: datetime | None = None) -> tuple[Path, int]:
+    """Create the next free log file of the template, empty, and return (path, run).
+
+    The file is created with O_CREAT | O_EXCL, so that of two programs that choose the
+    same name at the same moment (two `record --name same` started together: same
+    second, same run number) exactly one gets it and the other goes on to the next run
+    number.  Checking that a name is free and creating the file later is not enough:
+    HDF5 creates with truncation, and its file lock is released once a log switches to
+    SWMR mode, so the second program would silently truncate - and corrupt - the log
+    the first one is writing.  The empty file belongs to the caller, which turns it
+    into the log (LogFile truncates its own empty file) or removes it."""
+    folder = Path(folder)
+    now = now or datetime.now()
+    start = run or 1
+    previous = None
+    for n in range(start, start + MAX_RUNS):
+        path = folder / _file_name(template, test_name, n, now)
+        if path == previous:
+            # a template without {run}: every run number gives this one taken name
+            break
+        previous = path
+        try:
+            # 0o666: the umask decides the log's permissions, as for any new file
+            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            continue
+        except OSError as exc:
+            raise RecorderError(f"cannot create the log file: {explain_error(exc, path)}") from None
+        os.close(fd)
+        return path, n
+    raise RecorderError(f"no free file name for '{template}' in {folder}: "
+                        f"{_file_name(template, test_name, start, now)} and the names after "
+                        "it are taken - choose another --name or folder")
+
+
+def remove_own_file(path: Path) -> None:
+    """Remove a file this recording created (never one another program made: a
+    recording's files all come from reserve_log_path)."""
+    with contextlib.suppress(FileNotFoundError):
+        path.unlink()
 
 
 def explain_error(exc: BaseException, path: Path) -> str:
@@ -132,13 +186,21 @@ class Recorder:
         self.refused_blocks = 0        # blocks of packets a log does not hold (COMMAND)
         self.stop_reason = ""
         self.files: list[Path] = []
+        self.removed: list[Path] = []
+        self.removal_note = ""
         self.path: Path | None = None
+        self._journaled = 0            # journal records queued (the recording's content)
         self._frames_closed = 0        # frames in files already rolled over
         self._frames = 0
         self._bytes = 0
         self.last_flushed_host_time: float | None = None
         self._proc = None
         self._inbox = None
+        # puts to the writer happen under this lock and only while _accepting: after the
+        # Stop nothing more enters the queue, so what is in it is exactly what the writer
+        # reads, and its feeder thread can be joined (see _release)
+        self._put_lock = threading.Lock()
+        self._accepting = False
         self._outbox = None
         self._status_thread: threading.Thread | None = None
         self._stopped = threading.Event()
@@ -146,7 +208,9 @@ class Recorder:
 
     # ------------------------------------------------------------------ control
     def start(self, timeout: float = 60.0) -> Path:
-        """Create the first file (in the writer process); raises RecorderError if it cannot."""
+        """Create the first file (reserved here, written by the writer process); raises
+        RecorderError if it cannot.  A start that fails leaves nothing behind: no file,
+        no writer process, no queue, no temporary folder."""
         if self.state == "recording":
             raise RecorderError("already recording")
         if not self.folder.is_dir():
@@ -155,7 +219,31 @@ class Recorder:
             except OSError as exc:
                 raise RecorderError(f"cannot create the log folder: "
                                     f"{explain_error(exc, self.folder / 'x')}") from None
-        path, run = log_path(self.folder, self.test_name, self.config["template"])
+        # created here, exclusively: this recording's own file from the first instant
+        path, run = reserve_log_path(self.folder, self.test_name, self.config["template"])
+        try:
+            msg = self._start_writer(path, run, timeout)
+        except BaseException:
+            # (a Ctrl-C too) no waiting for a writer that failed: _release kills it, and
+            # then nobody has the file open
+            self._release(timeout=0.0)
+            remove_own_file(path)
+            raise
+        self.path = Path(msg.path)
+        self.files.append(self.path)
+        self._journaled = 0
+        self.removed = []
+        self.removal_note = ""
+        self._accepting = True
+        self.state = "recording"
+        self._stopped.clear()
+        self._status_thread = threading.Thread(target=self._watch, name="gs-recorder-status",
+                                               daemon=True)
+        self._status_thread.start()
+        return self.path
+
+    def _start_writer(self, path: Path, run: int, timeout: float) -> Started:
+        """Spawn the writer on the reserved `path` and wait for its Started."""
         ctx = mp.get_context("spawn")
         self._inbox = ctx.Queue(maxsize=self.queue_blocks)
         self._outbox = ctx.Queue()
@@ -173,7 +261,6 @@ class Recorder:
                 pass
             if not self._proc.is_alive():
                 code = self._proc.exitcode
-                self._kill()
                 # the usual cause: a script without a main guard, which the writer's
                 # spawned interpreter runs again while importing it
                 raise RecorderError(
@@ -181,19 +268,10 @@ class Recorder:
                     "put the code under `if __name__ == \"__main__\":` (Python's rule for "
                     "programs that start processes)") from None
             if time.monotonic() > deadline:
-                self._kill()
                 raise RecorderError(f"the log writer did not start within {timeout} s") from None
         if not isinstance(msg, Started):
-            self._kill()
             raise RecorderError(msg.message if isinstance(msg, StartFailed) else repr(msg))
-        self.path = Path(msg.path)
-        self.files.append(self.path)
-        self.state = "recording"
-        self._stopped.clear()
-        self._status_thread = threading.Thread(target=self._watch, name="gs-recorder-status",
-                                               daemon=True)
-        self._status_thread.start()
-        return self.path
+        return msg
 
     def _protocol_dir(self) -> Path:
         """The dictionary's TOML files, as the writer must decode with the same ones."""
@@ -218,9 +296,18 @@ class Recorder:
             data = list(block.frames)
         host = np.ascontiguousarray(np.broadcast_to(block.host_time, (len(block),)), dtype=np.float64)
         try:
-            self._inbox.put_nowait(Frames(block.packet.id, data, host))
+            self._put(Frames(block.packet.id, data, host))
         except queue.Full:
             self.discarded_blocks += 1
+
+    def _put(self, msg) -> bool:
+        """Queue `msg` for the writer without blocking; False once the recording is
+        stopping (queue.Full when the writer is behind)."""
+        with self._put_lock:
+            if not self._accepting:
+                return False
+            self._inbox.put_nowait(msg)
+            return True
 
     def queue_fill(self) -> float:
         """The share of the queue to the writer in use (0..1; 0 when not recording): a
@@ -242,8 +329,9 @@ class Recorder:
         if self.state != "recording":
             return
         try:
-            self._inbox.put_nowait(JournalEntry(at if at is not None else time.time(), kind,
-                                                record, bytes(blob)))
+            if self._put(JournalEntry(at if at is not None else time.time(), kind,
+                                      record, bytes(blob))):
+                self._journaled += 1
         except queue.Full:
             self.discarded_blocks += 1
 
@@ -254,31 +342,79 @@ class Recorder:
         """Write what is queued, close the file cleanly, return the final status.
 
         `reason` (e.g. "interrupted by the operator (Ctrl-C)", "session taken over by
-        ...") goes into the log's closing journal record, so the file says why it ends."""
-        if self.state == "recording":
+        ...") goes into the log's closing journal record, so the file says why it ends.
+
+        A recording that received nothing - no frame, no journal record (a `record`
+        whose device refused the connection) - keeps no file: its files are removed,
+        and `status().note` (also logged as a warning) says so."""
+        was_recording = self.state == "recording"
+        if was_recording:
             self.stop_reason = reason
+            with self._put_lock:        # a put under way finishes first; none follows
+                self._accepting = False
             try:
                 self._inbox.put(Stop(reason), timeout=timeout)
             except queue.Full:
                 pass
             self._stopped.wait(timeout)
+        self._release(timeout)
+        if was_recording and self.state == "stopped":
+            self._remove_if_empty()
+        return self.status()
+
+    def _release(self, timeout: float) -> None:
+        """End the writer process and the status thread, close the queues and remove
+        the temporary protocol folder: on every way out, start failures included.
+        Dropping the queues frees their named semaphores now (their finalizers unlink
+        them), not only at the interpreter's exit."""
         if self._status_thread is not None:
-            self._status_thread.join(timeout)
+            if self._status_thread is not threading.current_thread():
+                self._status_thread.join(timeout)
             self._status_thread = None
         if self._proc is not None:
-            self._proc.join(timeout)
-            if self._proc.is_alive():
+            if self._proc.pid is not None:          # started (a failed start() may not be)
+                self._proc.join(timeout)
                 self._kill()
+            # its sentinel pipe closed now, not left to the GC (ValueError: it survived
+            # the kill - then the GC closes it once the process is reaped)
+            with contextlib.suppress(ValueError):
+                self._proc.close()
             self._proc = None
+        with self._put_lock:
+            self._accepting = False
         for q in (self._inbox, self._outbox):
-            if q is not None:
-                q.close()
+            if q is None:
+                continue
+            q.close()
+            if self.state == "stopped":
+                # The writer read everything up to the Stop, and nothing followed it: the
+                # feeder thread has nothing left to send and ends at once.  Joined here,
+                # it drops its references to the queue's semaphores before we drop ours,
+                # so they are unlinked and unregistered now, in this thread.  Left to
+                # end on its own, the feeder could be the last holder and unlink one
+                # while the interpreter exits, before telling multiprocessing's
+                # resource tracker: "leaked semaphore" warnings at exit.
+                q.join_thread()
+            else:
+                # a writer that failed or never started may have left the pipe full,
+                # and a feeder blocked on it would never end: not waited for
                 q.cancel_join_thread()
         self._inbox = self._outbox = None
         if self._tmpdir is not None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             self._tmpdir = None
-        return self.status()
+
+    def _remove_if_empty(self) -> None:
+        """Remove the files of a recording that received nothing (see stop): an empty
+        log says only that something else failed, which the caller reports anyway."""
+        if self._frames_closed + self._frames or self._journaled:
+            return
+        for path in self.files:
+            remove_own_file(path)
+        self.removed = list(self.files)
+        self.removal_note = (f"removed {', '.join(str(p) for p in self.files)}: nothing was "
+                             "recorded, so no log is kept")
+        log.warning(self.removal_note)
 
     def _kill(self) -> None:
         if self._proc is not None and self._proc.is_alive():
@@ -287,7 +423,8 @@ class Recorder:
 
     def status(self) -> RecorderStatus:
         return RecorderStatus(self.state, self.path, self._frames_closed + self._frames,
-                              self._bytes, self.error, self.discarded_blocks, list(self.files))
+                              self._bytes, self.error, self.discarded_blocks, list(self.files),
+                              list(self.removed), self.removal_note)
 
     # ------------------------------------------------------------------ status thread
     def _watch(self) -> None:

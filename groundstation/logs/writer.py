@@ -71,6 +71,8 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
         f.flush()
         return f
 
+    # the recorder created this file, empty and exclusively (reserve_log_path), for this
+    # writer alone: LogFile's truncating create of it overwrites nothing
     path, run = Path(config["path"]), config["run"]
     try:
         lf = open_file(path, run)
@@ -145,10 +147,24 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
                 lf.journal([(time.time(), "recorder", {"action": "rollover"}, b"")])
                 lf.close(clean=True)
                 outbox.put(Closed(lf.frames_written, str(lf.path)))
-                run += 1
-                path = _next_path(config, run)
-                lf = open_file(path, run)
-                outbox.put(Started(str(path)))
+                following = None
+                try:
+                    # reserved (created exclusively) by this writer, like the first file
+                    # by the recorder: never a name another recording holds
+                    following, run = _next_path(config, run + 1)
+                    lf = open_file(following, run)
+                except Exception as exc:
+                    # the closed file keeps everything; the new one holds nothing of the
+                    # recording and is this writer's own: it goes
+                    if following is not None:
+                        _remove_own_file(following)
+                    why = _explain(exc, following or Path(config["folder"]) / "(next file)")
+                    outbox.put(Failed(f"could not start the next file after {lf.path.name}: "
+                                      f"{why}", lf.last_host_time, 0))
+                    outbox.close()
+                    outbox.join_thread()
+                    os._exit(3)         # as below: HDF5's state after a failed create
+                outbox.put(Started(str(following)))
         except Exception as exc:
             last = lf.last_host_time
             outbox.put(Failed(_explain(exc, lf.path), last, lf.frames_written))
@@ -185,7 +201,13 @@ def _rollover_due(lf: LogFile, config: dict[str, Any]) -> bool:
     return config["rollover_seconds"] is not None and time.time() - lf.created >= config["rollover_seconds"]
 
 
-def _next_path(config: dict[str, Any], run: int) -> Path:
-    from .recorder import log_path
-    path, _ = log_path(config["folder"], config["test_name"], config["template"], run)
-    return path
+def _next_path(config: dict[str, Any], run: int) -> tuple[Path, int]:
+    """The next file of a rollover, created exclusively (recorder.reserve_log_path):
+    run `run` or, if another recording took that name, the next free one."""
+    from .recorder import reserve_log_path
+    return reserve_log_path(config["folder"], config["test_name"], config["template"], run)
+
+
+def _remove_own_file(path: Path) -> None:
+    from .recorder import remove_own_file
+    remove_own_file(path)

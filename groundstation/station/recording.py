@@ -95,7 +95,10 @@ class RecordingSlot:
                  "dropped": link_drops(client) - self._drops_at_start,
                  "wall_seconds": round(time.monotonic() - self._t0, 3)}
         self.entries.append(entry)
-        if status.state == "stopped":
+        if status.removed:
+            entry["removed"] = [str(p) for p in status.removed]
+            self.echo(status.note)
+        elif status.state == "stopped":
             self.echo(f"recorded {status.frames} frames to {', '.join(p.name for p in status.files)}")
         return entry, status
 
@@ -113,9 +116,14 @@ class RecordingSlot:
         except Exception:                          # closing must go on regardless
             log.exception("could not note why the recording closes")
         status = rec.stop(reason=why)
-        self.entries.append({"name": rec.test_name, "files": [str(p) for p in status.files],
-                             "frames": status.frames, "discarded_blocks": rec.discarded_blocks,
-                             "state": status.state, "stop_reason": why})
+        entry = {"name": rec.test_name, "files": [str(p) for p in status.files],
+                 "frames": status.frames, "discarded_blocks": rec.discarded_blocks,
+                 "state": status.state, "stop_reason": why}
+        if status.removed:
+            # nothing reached it: say that the file named when it started is gone
+            entry["removed"] = [str(p) for p in status.removed]
+            self.echo(status.note)
+        self.entries.append(entry)
 
     def backlog(self) -> float:
         """How full the recorder's queue to its writer is (0..1; 0 when nothing records):
