@@ -41,8 +41,11 @@ def _cmd_record(args) -> int:
             try:
                 client = keeper.open()
             except GroundStationError as exc:
-                rec.stop(reason=f"connect failed: {exc}")
-                print(f"error: {exc}\nthe log {path} is closed with that reason", flush=True)
+                st = rec.stop(reason=f"connect failed: {exc}")
+                # a log that got nothing is removed (Recorder.stop says so in its note)
+                kept = (f"the log {path} is closed with that reason" if not st.removed
+                        else st.note or f"nothing was recorded: {path} removed")
+                print(f"error: {exc}\n{kept}", flush=True)
                 return EXIT_REFUSED
             if args.notes:
                 rec.note(args.notes)
