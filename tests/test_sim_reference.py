@@ -108,7 +108,8 @@ def keep_alive(fw, op, n, chunk=600):
 @pytest.mark.parametrize("setup", ["relative_2dof", "inertial_2dof"])
 @pytest.mark.parametrize("motor", ["coarse", "fine"])
 def test_linearised_plant_matches_zoh_of_g1_g2(tmp_path, dictionary, setup, motor):
-    path = variant(tmp_path, setup, model='"viscous"', encoder_noise="0.0")
+    # the linear plant: friction linearised (viscous), no bearing ripple (a nonlinearity)
+    path = variant(tmp_path, setup, model='"viscous"', encoder_noise="0.0", amplitude="0.0")
     tb = load_testbed(path)
     fw, op = firmware(dictionary, path)
     op("SET_MODE", mode="OPEN_LOOP")
