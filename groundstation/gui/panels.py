@@ -42,6 +42,11 @@ class ConnectionBar(QWidget):
         self.kind = QComboBox()
         self.kind.addItems(["Simulated testbed", "Ethernet (tcp://host:port)", "Serial port"])
         self.testbed = QComboBox()
+        # sized to a typical file name, not the longest one: a long variant's name
+        # (inertial_2dof_appendix_inertia.toml) must not widen the whole window
+        self.testbed.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
+        self.testbed.setMinimumContentsLength(22)
+        self.testbed.currentTextChanged.connect(self.testbed.setToolTip)   # the whole name
         self.testbed.addItems(testbeds)
         self._show_testbed(None)                 # the simulator's default, until one is chosen
         self.address = QLineEdit("tcp://127.0.0.1:5020")
