@@ -434,11 +434,9 @@ def _cell(row: dict[str, Any] | None, base: dict[str, Any] | None, group: Any, v
         v, b = finite(figures.get(key)), finite(basefig.get(key))
         cell[key] = v
         ratio = None
-        if not comparable:
-            pass
-        elif is_baseline and v is not None and v != 0:
+        if comparable and is_baseline and v is not None and v != 0:
             ratio = 1.0
-        elif v is not None and b is not None and b != 0:
+        elif comparable and v is not None and b is not None and b != 0:
             ratio = v / b
         cell[f"{key}_ratio"] = ratio
         cell[f"{key}_change_pct"] = None if ratio is None else (ratio - 1.0) * 100.0
