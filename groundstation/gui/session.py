@@ -193,6 +193,8 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
                     self.sim, self._sim_testbed = sim, self.testbed
                 address = self.sim.address
             client = open_client(self.d, address)
+            if self.address == "sim":              # started here: its liveness is known
+                client.device_gone = self.sim.gone
             client.telemetry_batch_s = TELEMETRY_BATCH_S
             client.subscribe(self.store)
             client.subscribe(self.limits)

@@ -196,6 +196,11 @@ class SimulatedDevice:
         t.start()
         return t
 
+    def gone(self) -> str:
+        """Why the device can no longer answer ("" while it runs; it lives in this
+        process, so only a stop ends it): DeviceClient.device_gone."""
+        return "stopped" if self._stop.is_set() else ""
+
     def stop(self) -> None:
         self._stop.set()
         if self._listener is not None:

@@ -65,6 +65,14 @@ class SimulatorProcess:
         raise LinkError(f"the simulated testbed did not start within {self.start_timeout} s"
                         + (f": {err.strip().splitlines()[-1]}" if err.strip() else ""))
 
+    def gone(self) -> str:
+        """Why the simulator can no longer answer ("" while its process runs)."""
+        proc = self.proc
+        if proc is None:
+            return "stopped"
+        code = proc.poll()
+        return "" if code is None else f"the simulator's process ended (status {code})"
+
     def stop(self) -> None:
         if self.proc is None:
             return

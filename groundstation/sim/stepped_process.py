@@ -118,6 +118,17 @@ class SteppedSimulatorProcess:
         self._reader.start()
         return self
 
+    def gone(self) -> str:
+        """Why the child can no longer answer ("" while it runs): what the link's command
+        wait asks before giving up on an answer (DeviceClient.device_gone)."""
+        if self._dead:
+            return self._dead
+        proc = self.proc
+        if proc is None:
+            return "stopped"
+        code = proc.poll()
+        return "" if code is None else f"its process ended (status {code})"
+
     def stop(self) -> None:
         proc, self.proc = self.proc, None
         conn = self._conn

@@ -73,6 +73,8 @@ class LinkKeeper:
         else:
             self.address = self.device
         client = open_client(self.dictionary, self.address)
+        if self.device == "sim":                  # started here: its liveness is known
+            client.device_gone = self.sim.gone
         self.client = client
         if self.on_client is not None:
             self._detach = self.on_client(client)

@@ -253,6 +253,9 @@ class Station(GeneratorVerbs):
         # heartbeats): a wall-time heartbeat would only land at random ticks
         held = self._device is not None and self.between_steps == "held"
         self.client = open_client(self.d, address, heartbeat=not held)
+        local = self._device or self._sim        # started here: its liveness is known
+        if local is not None:
+            self.client.device_gone = local.gone
         self.client.subscribe(self.state)
         if self.publish:               # before CONNECT: viewers see the session begin
             from ..fanout.publisher import Publisher
