@@ -41,8 +41,8 @@ from pathlib import Path
 from common import machine, save
 
 from groundstation import Testbed
-from groundstation.clock import ONE_CHUNK_IN_FLIGHT, FastPacing
-from groundstation.dictionary import load_dictionary
+from groundstation.station.clock import ONE_CHUNK_IN_FLIGHT, FastPacing
+from groundstation.core.dictionary import load_dictionary
 from groundstation.sim.device import SimulatedDevice
 from groundstation.sim.firmware import Firmware
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed

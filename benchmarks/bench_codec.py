@@ -22,7 +22,7 @@ import numpy as np
 from common import machine, save
 from groundstation.codec import StreamDeframer, FrameCodec
 from groundstation.codec.crc import RESIDUE
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 
 LINK_RATE_HZ = 1200.0
 STRUCT_CODES = {"u8": "B", "u16": "H", "u32": "I", "i8": "b", "i16": "h", "i32": "i",

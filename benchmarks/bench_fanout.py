@@ -37,7 +37,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).parent))
 from common import machine, save  # noqa: E402
 
-from groundstation.dictionary import load_dictionary  # noqa: E402
+from groundstation.core.dictionary import load_dictionary  # noqa: E402
 from groundstation.fanout.publisher import Publisher  # noqa: E402
 from groundstation.link import open_client  # noqa: E402
 from groundstation.sim.process import SimulatorProcess  # noqa: E402
@@ -47,7 +47,7 @@ ROOT = Path(__file__).resolve().parent.parent
 #: the viewer child: waits for the hello, then counts between "go" and "stop" (stdin)
 VIEWER = r"""
 import json, sys, time
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 from groundstation.fanout.viewer import WatchClient
 v = WatchClient(load_dictionary(), sys.argv[1]).start().wait_up(30.0)
 count = [0]

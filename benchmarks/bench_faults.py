@@ -35,7 +35,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from common import machine, save  # noqa: E402
 
 from groundstation.codec import FrameCodec  # noqa: E402
-from groundstation.dictionary import load_dictionary  # noqa: E402
+from groundstation.core.dictionary import load_dictionary  # noqa: E402
 from groundstation.link import open_client  # noqa: E402
 from groundstation.logs import LogReader  # noqa: E402
 from groundstation.sim import SimulatedDevice  # noqa: E402

@@ -64,7 +64,7 @@ from PySide6.QtWidgets import QApplication
 
 from gui_report import before_after, print_table
 
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 from groundstation.gui.main_window import MainWindow
 from groundstation.gui.session import Session
 from groundstation.logs.live import attach_recorder

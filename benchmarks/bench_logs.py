@@ -26,7 +26,7 @@ import numpy as np
 
 from common import machine, save
 from groundstation.codec import StreamDeframer
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 from groundstation.logs import Recorder
 from groundstation.logs.reader import LogReader
 from groundstation.sim import SimulatedDevice

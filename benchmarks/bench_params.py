@@ -24,7 +24,7 @@ from pathlib import Path
 
 from common import machine, save
 
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 from groundstation.link import open_client
 from groundstation.params import table as ptable
 from groundstation.params.clearance import clear_design

@@ -35,7 +35,7 @@ from scipy import signal
 
 from common import machine, save
 from groundstation.codec.frames import encode_items
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 from groundstation.link import open_client
 from groundstation.params import table as ptable
 from groundstation.sim import SimulatedDevice

@@ -10,7 +10,7 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 import numpy as np
 import pytest
 
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 from groundstation.link import open_client
 from groundstation.sim import SimulatedDevice
 
@@ -73,7 +73,7 @@ def dictionary():
 def strip_chart(qtbot, dictionary):
     """Make a strip-chart panel on (offscreen) screen with its refresh timer stopped, so
     the test refreshes by hand: strip_chart(store_seconds, (width, height))."""
-    from groundstation.display_buffers import TelemetryStore
+    from groundstation.live.display_buffers import TelemetryStore
     from groundstation.gui.charts import StripChartPanel
 
     def make(seconds: float, size: tuple[int, int]):

@@ -19,7 +19,7 @@ from groundstation.analysis.batch import (TABLE_KEYS, BatchOptions, analyze_one,
 from groundstation.analysis.batch_dask import run_dask
 from groundstation.analysis.batch_table import read_table, rows_frame, table_paths
 from groundstation.campaign import CampaignRunner, load_campaign
-from groundstation.cli import main
+from groundstation.cli.main import main
 
 ROOT = Path(__file__).resolve().parent.parent
 SEED_CAMPAIGN, SEED_SCRIPT = 7, 3

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from groundstation.analysis import AnalysisError, EnergyAccumulator, control_energy
-from groundstation.dictionary import default_control_rate_hz
+from groundstation.core.dictionary import default_control_rate_hz
 
 RATE_HZ = default_control_rate_hz()
 R_COARSE, R_FINE = 4.8, 6.8          # ohm, profiles/testbeds/inertial_2dof.toml

@@ -8,7 +8,7 @@ from scipy import signal
 
 from groundstation.analysis.frf import (FrequencyResponse, FrfError, compare_frf, h1_estimate,
                                         model_response)
-from groundstation.errors import GroundStationError
+from groundstation.core.errors import GroundStationError
 from groundstation.plant.model import (continuous_model, discretise, plant_transfer_functions)
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 

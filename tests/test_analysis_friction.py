@@ -9,8 +9,8 @@ import pytest
 
 from groundstation.analysis.friction_id import (DEFAULT_X_GRID, FrictionIdError, identify_friction,
                                                 split_branches, write_slope_table)
-from groundstation.dictionary import default_control_rate_hz
-from groundstation.errors import GroundStationError
+from groundstation.core.dictionary import default_control_rate_hz
+from groundstation.core.errors import GroundStationError
 from groundstation.plant.slope_table import (DEFAULT_SLOPE_TABLE, SlopeTableError,
                                              load_slope_table, validate_slope_table)
 from groundstation.sim.friction import FrictionParams, simulate_friction

@@ -208,7 +208,7 @@ lead_s = 0.2
 
 @pytest.fixture(scope="module")
 def pass_log(tmp_path_factory) -> Path:
-    from groundstation.scripting import Testbed
+    from groundstation import Testbed
 
     folder = tmp_path_factory.mktemp("fv_log")
     profile = folder / "fv_test_pass.toml"
@@ -254,7 +254,7 @@ def test_a_log_without_a_pass_is_a_specific_error(pass_log):
 
 
 def test_the_cli_metric(pass_log, capsys):
-    from groundstation.cli import main
+    from groundstation.cli.main import main
 
     assert main(["analyze", str(pass_log), "--metrics", "friction_velocity"]) == 0
     out = capsys.readouterr().out

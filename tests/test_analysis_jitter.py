@@ -14,7 +14,7 @@ from groundstation.analysis import (AnalysisError, JitterAccumulator, highpass_j
                                     sinusoid_smear_rms, windowed_smear_rms)
 from groundstation.analysis.jitter import (BRIDGE_MAX_PERIODS, SETTLING_TIME_CONSTANTS, error_table,
                                            highpass, window_variance_sum)
-from groundstation.dictionary import default_control_rate_hz
+from groundstation.core.dictionary import default_control_rate_hz
 
 RATE_HZ = default_control_rate_hz()
 #: high-pass outputs discarded after each (re)start of the filter, dT_i = 1 s

@@ -17,12 +17,13 @@ import h5py
 import numpy as np
 import pytest
 
-from groundstation import Testbed, cli_analysis
+from groundstation.cli import analysis as cli_analysis
+from groundstation import Testbed
 from groundstation.analysis import (AnalysisError, analyze_log, control_energy, los_jitter, psd,
                                     sensor_valid)
 from groundstation.analysis import log_metrics
 from groundstation.analysis.log_metrics import figures_from_testbed, frame_steps, missing_before
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.logs import LogError, LogReader
 from groundstation.plant.testbed import load_testbed
 

@@ -17,7 +17,7 @@ from groundstation.analysis.log_identification import (LogIdentificationError,
                                                        MissingChannelError, NoExcitationError,
                                                        WindowTooShortError, find_logs,
                                                        frf_from_log, hysteresis_from_log)
-from groundstation.errors import GroundStationError
+from groundstation.core.errors import GroundStationError
 from groundstation.logs import LogReader
 from groundstation.plant.testbed import PROFILES_DIR, load_testbed
 from groundstation.profiles.profile import profile_from_dict

@@ -80,7 +80,7 @@ def test_a_real_closed_loop_log_gets_the_check_and_an_open_loop_one_does_not(tmp
     found in the log's journal, its band from its own loop, its mode not excited; the
     part of the same log before the loop was closed gets no check."""
     from groundstation.analysis import analyze_log
-    from groundstation.scripting import Testbed
+    from groundstation import Testbed
 
     design = ROOT / "profiles/controllers/inertial_design1.toml"
     with Testbed("sim", testbed=ROOT / "profiles/testbeds/inertial_2dof.toml", fast=True,

@@ -12,7 +12,7 @@ from scipy import signal
 
 from groundstation.analysis import AnalysisError, WelchAccumulator, csp, psd
 from groundstation.analysis.spectra import runs, segment_samples
-from groundstation.dictionary import default_control_rate_hz
+from groundstation.core.dictionary import default_control_rate_hz
 
 RATE_HZ = default_control_rate_hz()
 

@@ -9,7 +9,7 @@ import pytest
 from scipy.optimize import brentq
 
 from groundstation.analysis.step import StepMetrics, StepMetricsError, step_metrics
-from groundstation.errors import GroundStationError
+from groundstation.core.errors import GroundStationError
 
 FS = 10_000.0           # Hz: fine sampling, so interpolation error is far below tolerance
 DT = 1.0 / FS

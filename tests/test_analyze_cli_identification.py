@@ -15,7 +15,7 @@ import pytest
 from groundstation import Testbed
 from groundstation.analysis.log_step import NoStepError, step_from_log
 from groundstation.analysis.step import step_metrics
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.logs import LogReader
 from groundstation.plant.slope_table import load_slope_table
 from groundstation.profiles.profile import profile_from_dict
@@ -157,7 +157,7 @@ def test_hysteresis_of_a_triangle_writes_the_slope_table(tmp_path, capsys):
 
 
 def test_the_cli_channel_choices_are_the_analysis_ones():
-    from groundstation import cli_analysis
+    from groundstation.cli import analysis as cli_analysis
     from groundstation.analysis import log_identification as li
 
     assert cli_analysis.FRF_INPUTS == tuple(li.FRF_INPUTS)

@@ -1,4 +1,6 @@
-"""Qt lives only in groundstation/gui: everything else imports no PySide6/pyqtgraph."""
+"""The architecture as rules: packages only at the top of groundstation/, a layer table
+with no import upward, no cycles, Qt only in gui/, a command line that starts light.
+docs/architecture.md draws the same map and says where to change what."""
 
 from __future__ import annotations
 
@@ -94,6 +96,46 @@ def import_cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return found
 
 
+#: the layers, bottom first.  A package imports only packages of layers below its own:
+#: data flows up from the foundation (core) and the wire (codec) to the programs (cli,
+#: which also launches the window).  The package's own __init__ and __main__ are the
+#: entry points and stand outside the table.
+LAYERS = [
+    ("core",),                                            # errors, dictionary, contracts, kinds
+    ("codec",),                                           # frames, CRC, sequence and tick counting
+    ("link", "plant", "live", "instruments", "profiles", "firmware_kit"),
+    ("logs", "params"),                                   # the recorder reads the link's blocks
+    ("sim", "analysis", "fanout"),                        # the twin, the metrics, the consoles
+    ("basemotion",),                                      # generator profiles, fitted with analysis
+    ("station",),                                         # one session: rig, clock, recording
+    ("campaign",),
+    ("gui",),
+    ("cli",),                                             # `groundstation gui` starts the window
+]
+ENTRY_POINTS = {"__init__", "__main__", "__version__"}
+
+
+def test_only_packages_at_the_top():
+    """groundstation/ holds packages and its two entry points, no loose modules: a new
+    module goes into the package of its layer."""
+    loose = sorted(p.name for p in PKG.glob("*.py") if p.stem not in ENTRY_POINTS)
+    assert not loose, f"loose modules at the top of groundstation/: {loose}"
+    packages = {p.name for p in PKG.iterdir() if (p / "__init__.py").exists()}
+    assert packages == {unit for layer in LAYERS for unit in layer}, \
+        "every package has a place in the layer table (tests/test_architecture.py LAYERS)"
+
+
+def test_no_package_imports_a_layer_above_its_own():
+    rank = {unit: i for i, layer in enumerate(LAYERS) for unit in layer}
+    upward = []
+    for unit, imported in package_imports().items():
+        if unit in ENTRY_POINTS:
+            continue
+        upward += [f"{unit} (layer {rank[unit]}) imports {other} (layer {rank[other]})"
+                   for other in sorted(imported - ENTRY_POINTS) if rank[other] >= rank[unit]]
+    assert not upward, "\n".join(upward)
+
+
 def test_the_cycle_finder_finds_a_cycle():
     assert import_cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert import_cycles({"a": {"b"}, "b": set()}) == []
@@ -118,7 +160,7 @@ def test_the_command_line_starts_without_the_heavy_libraries():
 
     heavy = ["numpy", "scipy", "h5py", "PySide6", "pyqtgraph", "pyvisa", "pyvisa_sim", "numba",
              "matplotlib", "serial", "zmq", "dask"]
-    code = ("import sys, groundstation.cli as c; c.build_parser(); "
+    code = ("import sys, groundstation.cli.main as c; c.build_parser(); "
             f"print(sorted({{m.split('.')[0] for m in sys.modules}} & set({heavy!r})))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True).stdout.strip()

@@ -17,7 +17,7 @@ from conftest import wait_for
 from groundstation.basemotion import (BaseMotionError, BaseStageModel, PsdFileError,
                                       check_base_motion, csp_curves, load_profile, load_psd,
                                       make_profile, parse_psd, synthesise_angle)
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.instruments import open_generator
 from groundstation.link import open_client
 from groundstation.sim import SimulatedDevice

@@ -11,8 +11,8 @@ import pytest
 from groundstation.analysis.batch import campaign_reports, find_logs
 from groundstation.analysis.batch_table import read_table
 from groundstation.campaign.report import CampaignReport
-from groundstation.cli import main
-from groundstation.scripting import Testbed
+from groundstation.cli.main import main
+from groundstation import Testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 

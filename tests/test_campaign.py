@@ -18,9 +18,9 @@ import pytest
 
 from groundstation.campaign import (CampaignError, CampaignReport, CampaignRunner,
                                     load_campaign)
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.logs import LogReader
-from groundstation.scripting import Testbed
+from groundstation import Testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 CAMPAIGNS = ROOT / "profiles" / "campaigns"

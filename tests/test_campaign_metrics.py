@@ -22,9 +22,9 @@ import pytest
 from groundstation.analysis import analyze_log
 from groundstation.campaign import CampaignReport, CampaignRunner, load_campaign, read_campaign
 from groundstation.campaign.metrics import campaign_metrics
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.logs import LogReader
-from groundstation.scripting import Testbed
+from groundstation import Testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 RELATIVE = ROOT / "profiles" / "testbeds" / "relative_2dof.toml"

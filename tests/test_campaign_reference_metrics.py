@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from groundstation.campaign import read_campaign
-from groundstation.cli import main
+from groundstation.cli.main import main
 
 ROOT = Path(__file__).resolve().parent.parent
 RELATIVE = ROOT / "profiles" / "testbeds" / "relative_2dof.toml"

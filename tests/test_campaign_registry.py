@@ -11,10 +11,10 @@ from pathlib import Path
 
 import pytest
 
-from groundstation import scripting
+from groundstation.station.station import Station
 from groundstation.campaign import (ACTIONS, Action, CampaignError, CampaignRunner, Step, StepRun,
                                     load_campaign, read_campaign, register)
-from groundstation.cli import main
+from groundstation.cli.main import main
 
 ROOT = Path(__file__).resolve().parent.parent
 CAMPAIGNS = ROOT / "profiles" / "campaigns"
@@ -127,7 +127,7 @@ def test_the_cli_refuses_an_unknown_action_before_connecting(tmp_path, capsys, m
     def no_session(*args, **kwargs):
         raise AssertionError("a session was opened for a refused campaign")
 
-    monkeypatch.setattr(scripting.Testbed, "__init__", no_session)
+    monkeypatch.setattr(Station, "__init__", no_session)
     logs = tmp_path / "logs"
     code = main(["campaign", "run", str(path), "--fast", "--log-folder", str(logs)])
     err = capsys.readouterr().err

@@ -21,7 +21,7 @@ import pytest
 
 from groundstation.campaign import CampaignError
 from groundstation.campaign.run_setup import resolve_setup, resume_command
-from groundstation.cli import main
+from groundstation.cli.main import main
 
 ROOT = Path(__file__).resolve().parent.parent
 PROFILES = ROOT / "profiles"

@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 
 from groundstation import Testbed
-from groundstation.clock import ONE_CHUNK_IN_FLIGHT, FastPacing, SteppedClock
+from groundstation.station.clock import ONE_CHUNK_IN_FLIGHT, FastPacing, SteppedClock
 from groundstation.link import open_client
 from groundstation.logs.reader import LogReader
 from groundstation.plant.testbed import TESTBEDS_DIR

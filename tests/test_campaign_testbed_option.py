@@ -7,7 +7,7 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.logs import LogReader
 
 ROOT = Path(__file__).resolve().parent.parent

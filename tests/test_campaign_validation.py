@@ -9,12 +9,12 @@ from pathlib import Path
 
 import pytest
 
-from groundstation import scripting
+from groundstation.station.station import Station
 from groundstation.campaign import (CampaignError, CampaignReport, CampaignRunner,
                                     load_campaign, read_campaign)
-from groundstation.cli import build_parser, main
+from groundstation.cli.main import build_parser, main
 from groundstation.logs import LogReader
-from groundstation.scripting import Testbed
+from groundstation import Testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 CAMPAIGNS = ROOT / "profiles" / "campaigns"
@@ -152,7 +152,7 @@ def test_cli_refuses_a_bad_campaign_before_connecting(tmp_path, capsys, monkeypa
     def no_session(*args, **kwargs):
         raise AssertionError("a session was opened for a refused campaign")
 
-    monkeypatch.setattr(scripting.Testbed, "__init__", no_session)
+    monkeypatch.setattr(Station, "__init__", no_session)
     logs = tmp_path / "logs"
     code = main(["campaign", "run", str(path), "--fast", "--log-folder", str(logs)])
     err = capsys.readouterr().err
@@ -196,7 +196,7 @@ def interrupt_campaign(tmp_path) -> Path:
 def ctrl_c_in_dwell(monkeypatch, run: int):
     """The operator's Ctrl-C arrives (as KeyboardInterrupt in the main thread) while
     run `run` dwells."""
-    real = scripting.Testbed.dwell
+    real = Station.dwell
     calls = []
 
     def dwell(self, seconds, progress=None):
@@ -206,7 +206,7 @@ def ctrl_c_in_dwell(monkeypatch, run: int):
             raise KeyboardInterrupt
         return real(self, seconds, progress)
 
-    monkeypatch.setattr(scripting.Testbed, "dwell", dwell)
+    monkeypatch.setattr(Station, "dwell", dwell)
 
 
 def check_closed_log(path):

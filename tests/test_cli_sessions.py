@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.link import open_client
 from groundstation.logs import LogReader
 from groundstation.sim import SimulatedDevice

@@ -12,8 +12,8 @@ from codec_helpers import (HR_SIZE, NO_ERRORS, all_frames, collect, count_sync, 
 
 from groundstation.codec import DatagramDecoder, FrameCodec, StreamDeframer
 from groundstation.codec.crc import crc_bytes
-from groundstation.errors import (CrcError, FrameLengthError, ProtocolVersionError,
-                                  UnknownPacketError)
+from groundstation.core.errors import (CrcError, FrameLengthError, ProtocolVersionError,
+                                       UnknownPacketError)
 
 
 @pytest.fixture(scope="module")

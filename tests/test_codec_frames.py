@@ -14,9 +14,9 @@ from codec_helpers import HK_SIZE, HR_SIZE, event_frame, hk_frame
 from groundstation.codec import (DatagramDecoder, FrameCodec, StreamDeframer, decode_items,
                                  encode_items)
 from groundstation.codec.crc import RESIDUE, crc_bytes, frame_crc
-from groundstation.dictionary import (FRAME_OVERHEAD, HEADER_SIZE, Item, default_protocol_dir,
-                                      load_dictionary)
-from groundstation.errors import EncodeError, FrameLengthError, UnknownPacketError
+from groundstation.core.dictionary import (FRAME_OVERHEAD, HEADER_SIZE, Item, default_protocol_dir,
+                                           load_dictionary)
+from groundstation.core.errors import EncodeError, FrameLengthError, UnknownPacketError
 
 
 @pytest.fixture(scope="module")

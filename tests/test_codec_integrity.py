@@ -11,8 +11,8 @@ from codec_helpers import HR_SIZE, event_frame, hk_frame, hr_frames, patched, re
 
 from groundstation.codec import FrameCodec
 from groundstation.codec.crc import RESIDUE, RUN_CHUNK, valid_frames
-from groundstation.errors import (CrcError, DecodeError, FrameLengthError, ProtocolVersionError,
-                                  UnknownPacketError)
+from groundstation.core.errors import (CrcError, DecodeError, FrameLengthError, ProtocolVersionError,
+                                       UnknownPacketError)
 
 
 @pytest.fixture(scope="module")

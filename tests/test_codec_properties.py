@@ -17,8 +17,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from groundstation.codec import DatagramDecoder, FrameCodec, StreamDeframer
-from groundstation.dictionary import CRC_SIZE, HEADER_SIZE, load_dictionary
-from groundstation.errors import DecodeError
+from groundstation.core.dictionary import CRC_SIZE, HEADER_SIZE, load_dictionary
+from groundstation.core.errors import DecodeError
 
 DICTIONARY = load_dictionary()
 CODEC = FrameCodec(DICTIONARY)

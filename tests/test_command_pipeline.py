@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from groundstation.errors import CommandRejected
+from groundstation.core.errors import CommandRejected
 from groundstation.link import DeviceClient
 from groundstation.link.transports import TcpStream
 

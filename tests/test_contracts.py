@@ -1,4 +1,4 @@
-"""The contracts (groundstation/contracts.py) hold for their implementations: the live
+"""The contracts (groundstation/core/contracts.py) hold for their implementations: the live
 link and the log replay are both telemetry sources, the link is a command channel, the
 4050 driver is the base-motion instrument - by member and by call signature."""
 
@@ -9,11 +9,11 @@ from pathlib import Path
 
 import pytest
 
-from groundstation.contracts import BaseMotionInstrument, CommandChannel, TelemetrySource
+from groundstation.core.contracts import BaseMotionInstrument, CommandChannel, TelemetrySource
 from groundstation.instruments.fg4050 import FunctionGenerator4050
 from groundstation.link.client import DeviceClient
 from groundstation.logs.replay import ReplaySource
-from groundstation.scripting import Testbed
+from groundstation import Testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 INERTIAL = ROOT / "profiles" / "testbeds" / "inertial_2dof.toml"

@@ -10,9 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.dictionary import (FRAME_OVERHEAD, HEADER_SIZE, default_protocol_dir,
-                                      load_dictionary)
-from groundstation.errors import DictionaryError
+from groundstation.core.dictionary import (FRAME_OVERHEAD, HEADER_SIZE, default_protocol_dir,
+                                           load_dictionary)
+from groundstation.core.errors import DictionaryError
 
 PROTOCOL_FILES = ("telemetry.toml", "commands.toml", "parameters.toml")
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from groundstation.codec import FrameCodec
-from groundstation.display_buffers import TelemetryStore, peak_decimate, with_gap_breaks
+from groundstation.live.display_buffers import TelemetryStore, peak_decimate, with_gap_breaks
 
 
 def hr_block(codec, seq, values=None):

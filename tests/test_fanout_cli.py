@@ -8,7 +8,7 @@ import threading
 
 import pytest
 
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.fanout.endpoints import FanoutError
 from groundstation.fanout.publisher import Publisher
 from groundstation.fanout.viewer import WatchClient

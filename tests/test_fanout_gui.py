@@ -9,7 +9,7 @@ import pytest
 
 from groundstation.fanout.endpoints import read_only_message
 from groundstation.logs.check import check_log
-from groundstation.scripting import Testbed
+from groundstation import Testbed
 
 pytest.importorskip("pytestqt")
 

@@ -9,7 +9,7 @@ import threading
 import numpy as np
 import pytest
 
-from groundstation.errors import GroundStationError
+from groundstation.core.errors import GroundStationError
 from groundstation.fanout.endpoints import FanoutError, ReadOnlyConsole
 from groundstation.fanout.publisher import Publisher
 from groundstation.fanout.viewer import WatchClient
@@ -190,7 +190,7 @@ def test_a_watch_client_is_a_telemetry_source(dictionary):
     """The recorder, the charts and monitor consume it as they consume the live link."""
     import inspect
 
-    from groundstation.contracts import TelemetrySource
+    from groundstation.core.contracts import TelemetrySource
     from groundstation.link.client import DeviceClient
 
     viewer = WatchClient(dictionary, "tcp://127.0.0.1:9")

@@ -15,7 +15,7 @@ import pytest
 from conftest import wait_for
 from groundstation.basemotion import (BaseMotionError, band_rms, check_record, load_profile,
                                       preview_spectrum)
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.instruments import open_generator
 from groundstation.link import open_client
 from groundstation.logs import Recorder

@@ -20,8 +20,8 @@ from pathlib import Path
 
 import pytest
 
-from groundstation.cli import main
-from groundstation.errors import GroundStationError
+from groundstation.cli.main import main
+from groundstation.core.errors import GroundStationError
 from groundstation.instruments import (InstrumentError, InstrumentLimitError,
                                        InstrumentLinkError, SafetyLimitError, open_generator)
 from groundstation.sim.scpi_fg import ScpiServer, SimulatedGenerator

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from conftest import wait_for
-from groundstation.errors import CommandFailed, CommandRejected
+from groundstation.core.errors import CommandFailed, CommandRejected
 from groundstation.params import table as ptable
 
 

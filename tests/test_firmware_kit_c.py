@@ -31,7 +31,7 @@ import numpy as np
 import pytest
 
 from groundstation.codec import FrameCodec, StreamDeframer, decode_items
-from groundstation.dictionary import Item, load_dictionary
+from groundstation.core.dictionary import Item, load_dictionary
 from groundstation.firmware_kit import export_c, render_c
 from groundstation.firmware_kit.layout import C_TYPES, default_table, lower, macro
 

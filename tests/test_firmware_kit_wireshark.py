@@ -24,7 +24,7 @@ from pathlib import Path
 import pytest
 
 from groundstation.codec import FrameCodec, StreamDeframer, encode_items
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 from groundstation.firmware_kit import export_wireshark, render_lua
 from groundstation.firmware_kit.layout import lower
 

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.errors import GroundStationError
+from groundstation.core.errors import GroundStationError
 from groundstation.plant.slope_table import DEFAULT_SLOPE_TABLE, SlopeTableError, load_slope_table
 from groundstation.sim.friction import (
-    FRICTION_MODELS, S_CLOSURES, S_DEPTH, S_DIR, S_OVERFLOW, S_REVERSALS,
-    S_T, FrictionConfigError, FrictionParams, friction_step, new_state, simulate_friction,
-)
+                                        FRICTION_MODELS, S_CLOSURES, S_DEPTH, S_DIR, S_OVERFLOW, S_REVERSALS,
+                                        S_T, FrictionConfigError, FrictionParams, friction_step, new_state, simulate_friction,
+                                        )
 
 SHIPPED = Path(__file__).resolve().parent.parent / "profiles" / "friction_slope_lut.csv"
 SIGMA, TC = 5730.0, 2.25

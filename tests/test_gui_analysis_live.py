@@ -20,7 +20,7 @@ from groundstation.analysis import AnalysisError, analyze_log, control_energy, l
 from groundstation.analysis.jitter import sensor_valid
 from groundstation.analysis.log_metrics import frame_steps, missing_before
 from groundstation.codec import FrameCodec, StreamDeframer
-from groundstation.display_buffers import TelemetryStore
+from groundstation.live.display_buffers import TelemetryStore
 from groundstation.gui.analysis_live import LiveSnapshot, live_metrics, take_snapshot
 from groundstation.gui.analysis_tables import METRIC_COLUMNS, VALUE_ROLE
 from groundstation.plant.testbed import load_testbed

@@ -14,7 +14,7 @@ import pytest
 from PySide6.QtCore import Qt
 
 from groundstation.logs import LogReader
-from groundstation.scripting import Testbed
+from groundstation import Testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 RELATIVE = ROOT / "profiles" / "testbeds" / "relative_2dof.toml"

@@ -10,8 +10,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from groundstation.display_buffers import (PYRAMID_BLOCKS, TelemetryStore, aligned_envelope,
-                                           bin_factor)
+from groundstation.live.display_buffers import (PYRAMID_BLOCKS, TelemetryStore, aligned_envelope,
+                                                bin_factor)
 from groundstation.gui.charts import StripChartPanel
 
 from conftest import HighRateFeeder
@@ -201,7 +201,7 @@ def test_pyramid_fed_only_for_wide_requests_catches_up_exactly(dictionary):
     """A scrolling chart's frames complete a bin or two, reduced from the samples; the
     pyramid is fed only when many bins are asked for (a new window or width) - after a
     few seconds of scrolling, and after the ring wrapped past what it had been fed."""
-    import groundstation.display_buffers as db
+    import groundstation.live.display_buffers as db
 
     store = TelemetryStore(dictionary, seconds=5.0)             # 6,000 HIGH_RATE samples
     ring = store.ring("HIGH_RATE")

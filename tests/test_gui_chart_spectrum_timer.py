@@ -8,7 +8,7 @@ from __future__ import annotations
 import pytest
 from PySide6.QtWidgets import QApplication, QWidget
 
-from groundstation.display_buffers import TelemetryStore
+from groundstation.live.display_buffers import TelemetryStore
 from groundstation.gui.spectrum import SpectrumView
 
 

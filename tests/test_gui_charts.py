@@ -16,7 +16,7 @@ from groundstation.gui.channel_tree import ChannelTree, display_unit, format_val
 from groundstation.gui.charts import StripChartPanel
 from groundstation.gui.spectrum import SpectrumView, welch_psd
 from groundstation.sim import SimulatedDevice
-from groundstation.display_buffers import TelemetryStore
+from groundstation.live.display_buffers import TelemetryStore
 
 from conftest import HighRateFeeder
 

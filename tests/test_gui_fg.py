@@ -20,7 +20,7 @@ from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QMenu
 
 from groundstation.basemotion import BaseStageModel
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.gui.fg_motion_check import newest_device_time
 from groundstation.gui.fg_panel import FIELD_BAD
 from groundstation.logs import LogReader

@@ -17,7 +17,7 @@ import pytest
 from groundstation.campaign.metrics import campaign_metrics
 from groundstation.campaign.reading import load_campaign
 from groundstation.campaign.runner import CampaignRunner
-from groundstation.scripting import Testbed
+from groundstation import Testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 PROFILES = ROOT / "profiles"

@@ -14,10 +14,10 @@ import pytest
 
 from conftest import collect, frames_of, wait_for
 from groundstation.codec import FrameCodec, StreamDeframer
-from groundstation.dictionary import load_dictionary
-from groundstation.errors import (CommandArgumentError, CommandRejected, CommandTimeout,
-                                  DictionaryMismatchError, LinkError, LinkLostError,
-                                  NotConnectedError, PortInUseError)
+from groundstation.core.dictionary import load_dictionary
+from groundstation.core.errors import (CommandArgumentError, CommandRejected, CommandTimeout,
+                                       DictionaryMismatchError, LinkError, LinkLostError,
+                                       NotConnectedError, PortInUseError)
 from groundstation.link import DeviceClient, open_client, parse_address
 from groundstation.link.transports import TcpStream, UdpReceiver
 from groundstation.sim import SimulatedDevice

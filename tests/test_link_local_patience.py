@@ -13,7 +13,7 @@ import threading
 import pytest
 
 from conftest import wait_for
-from groundstation.errors import CommandTimeout
+from groundstation.core.errors import CommandTimeout
 from groundstation.link import open_client
 from groundstation.sim import SimulatedDevice
 

@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from groundstation.codec import FrameCodec
-from groundstation.dictionary import load_dictionary
-from groundstation.errors import DictionaryMismatchError, SessionEndedError
+from groundstation.core.dictionary import load_dictionary
+from groundstation.core.errors import DictionaryMismatchError, SessionEndedError
 from groundstation.link import open_client
 from groundstation.logs import LogReader, Recorder
 from groundstation.logs.live import attach_recorder
@@ -157,7 +157,7 @@ def test_one_wild_sequence_number_from_the_device_is_not_a_billion_drops(
     """A frame with a wild sequence number that does come from the device (a firmware
     bug, a corrupted header whose CRC still matched) is recorded as received, and both
     the live statistics and `log info` count it as an outlier, not as 1.1e9 drops."""
-    from groundstation.cli import main
+    from groundstation.cli.main import main
 
     rec, detach, blocks = recording_session(client, dictionary, tmp_path)
     codec = FrameCodec(dictionary)

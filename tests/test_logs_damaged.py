@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 import scipy.io
 
-from groundstation.cli import main
-from groundstation.errors import GroundStationError
+from groundstation.cli.main import main
+from groundstation.core.errors import GroundStationError
 from groundstation.logs import LogFile, LogReader, ReplayError, iter_blocks
 from groundstation.logs.check import check_log
 from groundstation.logs.export import ExportError, export_csv, export_mat

@@ -17,7 +17,7 @@ import pytest
 import scipy.io
 
 from groundstation.codec import StreamDeframer, TelemetryBlock
-from groundstation.errors import GroundStationError
+from groundstation.core.errors import GroundStationError
 from groundstation.logs import LogFile, Recorder
 from groundstation.logs.export import export_csv, export_mat, matlab_name
 from groundstation.logs.reader import (EmptyRangeError, LogError, LogFormatError, LogQueryError,

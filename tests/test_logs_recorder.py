@@ -24,7 +24,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 LIVE_RECORDING = """
     import sys, time
-    from groundstation.dictionary import load_dictionary
+    from groundstation.core.dictionary import load_dictionary
     from groundstation.link import open_client
     from groundstation.logs import Recorder
     from groundstation.sim import SimulatedDevice
@@ -98,7 +98,7 @@ DISK_FULL = """
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)    # a write past the limit fails instead
     resource.setrlimit(resource.RLIMIT_FSIZE, (4_000_000, 4_000_000))
     from groundstation.codec import StreamDeframer
-    from groundstation.dictionary import load_dictionary
+    from groundstation.core.dictionary import load_dictionary
     from groundstation.logs import Recorder
     from groundstation.sim import SimulatedDevice
     d = load_dictionary()

@@ -44,7 +44,7 @@ ROOT = Path(groundstation.__file__).resolve().parent.parent
 # so that a timeout names the command that hung
 _CHILD = r"""
 import contextlib, io, json, sys
-from groundstation.cli import main
+from groundstation.cli.main import main
 log, csv = sys.argv[1], sys.argv[2]
 for name, argv in (("info", ["log", "info", log]), ("check", ["log", "check", log]),
                    ("export", ["log", "export", log, "--salvage", "-o", csv])):
@@ -177,7 +177,7 @@ def test_log_check_keeps_its_status_when_its_output_pipe_is_closed(recorded, tmp
     """`log check F | head -1` (or any reader that leaves early): the status is still the
     verdict, not the 0 a closed pipe used to turn it into."""
     log = _cut(recorded, tmp_path, 60)
-    proc = subprocess.Popen([sys.executable, "-c", "import sys; from groundstation.cli import "
+    proc = subprocess.Popen([sys.executable, "-c", "import sys; from groundstation.cli.main import "
                              "main; sys.exit(main(sys.argv[1:]))", "log", "check", str(log)],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, cwd=ROOT)
     proc.stdout.close()                       # the reader is gone before anything is written

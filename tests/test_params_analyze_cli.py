@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from groundstation.cli import main
+from groundstation.cli.main import main
 
 CONTROLLERS = Path(__file__).resolve().parent.parent / "profiles" / "controllers"
 

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.params import table as ptable
 from groundstation.params.design import load_design, table_values
 from groundstation.params.upload import ParameterHistory

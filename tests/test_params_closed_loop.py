@@ -20,7 +20,7 @@ from groundstation.params.upload import ParameterLoader
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import Firmware
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
-from groundstation.display_buffers import TelemetryStore
+from groundstation.live.display_buffers import TelemetryStore
 
 CONTROLLERS = Path(__file__).resolve().parent.parent / "profiles" / "controllers"
 RATE = 1200

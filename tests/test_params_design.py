@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.params import table as ptable
 from groundstation.params.design import (CONTROL_RATE_HZ, DesignError, TransferFunction,
                                          bilinear_rate_hz, cascade_match, discretisation_match,

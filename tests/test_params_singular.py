@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.params.design import (DesignError, TransferFunction, bilinear_singular_point,
                                          discretise, load_design)
 from groundstation.params.upload import ParameterHistory

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from groundstation.errors import CommandFailed
+from groundstation.core.errors import CommandFailed
 from groundstation.link import open_client
 from groundstation.params import table as ptable
 from groundstation.params.clearance import override_table

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.cli import main
+from groundstation.cli.main import main
 from groundstation.profiles import waveforms as g
 from groundstation.profiles.profile import (WAVEFORMS_DIR, Profile, ProfileFileError, ProfileRefused,
                                             check_profile, load_profile, preview, profile_from_dict,

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from groundstation.codec import StreamDeframer
-from groundstation.errors import GroundStationError
+from groundstation.core.errors import GroundStationError
 from groundstation.link.stats import LinkStatistics
 from groundstation.logs import LogFile, Recorder
 from groundstation.logs.replay import ReplayError, ReplaySource, iter_blocks

@@ -9,7 +9,7 @@ import pytest
 
 from groundstation import Testbed
 from groundstation.logs import LogReader
-from groundstation.scripting import ScriptError
+from groundstation import ScriptError
 
 ROOT = Path(__file__).resolve().parent.parent
 

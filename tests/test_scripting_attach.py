@@ -11,7 +11,7 @@ import pytest
 from groundstation.instruments import open_generator
 from groundstation.link import open_client
 from groundstation.logs import LogReader
-from groundstation.scripting import ScriptError, Testbed
+from groundstation import ScriptError, Testbed
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.scpi_fg import attach_generator
 from groundstation.plant.testbed import load_testbed

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 from groundstation.params.table import default_values
 from groundstation.plant.model import TH1, TH2
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed

@@ -14,7 +14,7 @@ import threading
 import numpy as np
 import pytest
 
-from groundstation.cli import build_parser
+from groundstation.cli.main import build_parser
 from groundstation.link import open_client
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.process import SimulatorProcess

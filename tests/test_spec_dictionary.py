@@ -9,7 +9,7 @@ import struct
 import pytest
 from spec_helpers import PROTOCOL, load_toml, spec_text
 
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,7 @@ import pytest
 from spec_helpers import HEADER, PROTOCOL, RESIDUE, assert_item, parse_number, spec_text
 
 from groundstation.codec import FrameCodec
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 
 
 @pytest.fixture(scope="module")

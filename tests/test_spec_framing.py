@@ -187,7 +187,7 @@ def all_frames() -> dict[str, list[bytes]]:
 # =====================================================================================
 
 from groundstation.codec import DatagramDecoder, FrameCodec, StreamDeframer  # noqa: E402
-from groundstation.dictionary import load_dictionary  # noqa: E402
+from groundstation.core.dictionary import load_dictionary  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -13,7 +13,7 @@ import pytest
 from spec_helpers import (PROTOCOL, STRUCT_CODE, f32, load_toml, parse_number, spec_section,
                           spec_text)
 
-from groundstation.dictionary import load_dictionary
+from groundstation.core.dictionary import load_dictionary
 
 
 @pytest.fixture(scope="module")

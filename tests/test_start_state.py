@@ -10,7 +10,7 @@ import pytest
 
 from groundstation import Testbed
 from groundstation.logs import LogReader
-from groundstation.scripting import ScriptError
+from groundstation import ScriptError
 from groundstation.station.start_state import StartCriteria
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 
 from groundstation.codec import TelemetryBlock
-from groundstation.link.stats import ClockSync, LinkStatistics, TickUnwrapper
+from groundstation.codec.ticks import TickUnwrapper
+from groundstation.link.stats import ClockSync, LinkStatistics
 
 
 def block(dictionary, seq, ticks, host_time):

@@ -13,7 +13,7 @@ import sys
 import pytest
 
 from groundstation import Testbed
-from groundstation.errors import LinkError, LinkLostError
+from groundstation.core.errors import LinkError, LinkLostError
 from groundstation.plant.testbed import TESTBEDS_DIR
 from groundstation.sim.stepped_process import SteppedSimulatorProcess
 
@@ -79,7 +79,7 @@ def test_the_child_ends_when_the_ground_station_goes(tmp_path):
     script = tmp_path / "dies.py"
     script.write_text(
         "import os, sys\n"
-        "from groundstation.dictionary import load_dictionary\n"
+        "from groundstation.core.dictionary import load_dictionary\n"
         "from groundstation.sim.stepped_process import SteppedSimulatorProcess\n"
         f"sim = SteppedSimulatorProcess(load_dictionary(), testbed={str(TESTBED)!r}).start()\n"
         "print(sim.proc.pid, flush=True)\n"

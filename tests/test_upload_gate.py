@@ -16,7 +16,7 @@ from groundstation.params.clearance import (Clearance, ValidationRefused, clear_
                                             override_table)
 from groundstation.params.design import load_design, table_values
 from groundstation.params.upload import MemoryHistory, NotClearedError, ParameterLoader
-from groundstation.scripting import ScriptError, Testbed
+from groundstation import ScriptError, Testbed
 
 ROOT = Path(__file__).resolve().parent.parent
 CONTROLLERS = ROOT / "profiles" / "controllers"

@@ -20,7 +20,7 @@ os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
 from PySide6.QtCore import QSettings, Qt, QTimer  # noqa: E402
 from PySide6.QtWidgets import QApplication  # noqa: E402
 
-from groundstation.dictionary import load_dictionary  # noqa: E402
+from groundstation.core.dictionary import load_dictionary  # noqa: E402
 from groundstation.gui.main_window import MainWindow  # noqa: E402
 from groundstation.gui.session import Session  # noqa: E402
 

@@ -11,7 +11,7 @@ See docs/analysis.md for the definitions.
 
 from __future__ import annotations
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 
 
 class AnalysisError(GroundStationError):

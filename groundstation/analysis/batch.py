@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Iterable
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from .batch_rows import EXTRA_METRICS, ROW_KEYS, extra_results, log_row
 from .validity import MAX_EXCLUDED_FRACTION
 

@@ -2,7 +2,7 @@
 asked for by name (step, frf, hysteresis, friction_velocity), flattened to the keys of
 `groundstation analyze --json/--csv` (ROW_KEYS).
 
-It lives here, not in cli_analysis.py, because the batch task (batch.py) builds the very
+It lives here, not in cli/analysis.py, because the batch task (batch.py) builds the very
 same row inside a Dask worker, and the analysis package must not import the CLI (the
 package graph has no cycles: tests/test_architecture.py).  The CLI calls these too, so a
 row from `analyze LOG --csv` and a row of `analyze FOLDER --table OUT` are one code path.
@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from .log_identification import DEFAULT_MIN_COHERENCE
 from .validity import MAX_EXCLUDED_FRACTION
 

@@ -19,7 +19,7 @@ from typing import Any, Iterable
 
 import numpy as np
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 
 SUFFIXES = (".parquet", ".csv")
 #: columns whose values are text even when every row left them empty

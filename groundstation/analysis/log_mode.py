@@ -23,7 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from .loop_mode import LoopMode, design_mode
 
 log = logging.getLogger(__name__)
@@ -62,7 +62,7 @@ def _uploads(reader) -> list[tuple[str, bytes]]:
 def _mode_of(path: Path, blob: bytes | None) -> tuple[LoopMode | None, str]:
     """(the design's lightly damped mode, its design mode) with the table `blob` (None:
     the design's own table); raises GroundStationError for a file or table unusable."""
-    from ..dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
     from ..params.design_file import load_design
     from ..params.table import unpack
 

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 
 
 class BaseMotionError(GroundStationError):

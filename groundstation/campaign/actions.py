@@ -23,7 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..instruments import spec4050
 from .checks import StepCheck
 from .model import Step

@@ -10,7 +10,7 @@ import math
 from pathlib import Path
 from typing import Any, Callable
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..instruments import spec4050
 from .model import Step
 

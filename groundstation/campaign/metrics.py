@@ -44,7 +44,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from .model import AnalysisSpec, Campaign
 from .reading import run_names
 from .report import CampaignReport

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 
 
 class CampaignError(GroundStationError):

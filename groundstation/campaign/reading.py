@@ -10,8 +10,8 @@ import re
 from pathlib import Path
 from typing import Any
 
-from ..errors import GroundStationError
-from ..tomlfile import read_toml
+from ..core.errors import GroundStationError
+from ..core.tomlfile import read_toml
 from .actions import ACTIONS, PATH_KEYS, known_actions
 from .checks import CampaignChecker, show
 from .model import REFERENCE_METRICS, AnalysisSpec, Campaign, CampaignError, Step
@@ -334,7 +334,7 @@ def check_campaign(campaign: Campaign, dictionary=None) -> list[str]:
     motor peak currents, the generator's [limits]), the 4053B generator's own limits;
     every referenced design, profile and PSD file must load.  Returns the problems,
     each naming file, step and field; nothing is sent anywhere."""
-    from ..dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
     from ..plant.testbed import load_testbed
 
     d = dictionary if dictionary is not None else load_dictionary()

@@ -249,7 +249,7 @@ def write_slope_tables(metrics: CampaignMetrics, report_path: str | Path) -> lis
     profiles/friction_slope_lut.csv); the row's hyst_slope_table_file names it.  A table
     that cannot be written is the row's reference error, not an exception."""
     from ..analysis.friction_id import write_slope_table
-    from ..errors import GroundStationError
+    from ..core.errors import GroundStationError
 
     written = []
     for i, d in _having(metrics, "hysteresis"):

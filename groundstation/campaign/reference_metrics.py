@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 
 log = logging.getLogger(__name__)
 

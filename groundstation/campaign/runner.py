@@ -17,8 +17,8 @@ import traceback
 from pathlib import Path
 from typing import Any, Callable
 
-from ..clock import ScriptAborted
-from ..errors import GroundStationError
+from ..station.clock import ScriptAborted
+from ..core.errors import GroundStationError
 from .actions import ACTIONS, StepRun, known_actions
 from .model import Campaign, Step
 from .report import CampaignReport, StepResult

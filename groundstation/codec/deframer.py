@@ -21,9 +21,9 @@ from typing import Iterable
 
 import numpy as np
 
-from ..dictionary import CRC_SIZE, HEADER_SIZE
-from ..errors import (CrcError, DecodeError, FrameLengthError, ProtocolVersionError,
-                      UnknownPacketError)
+from ..core.dictionary import CRC_SIZE, HEADER_SIZE
+from ..core.errors import (CrcError, DecodeError, FrameLengthError, ProtocolVersionError,
+                           UnknownPacketError)
 from .crc import valid_frames
 from .frames import FrameCodec, TelemetryBlock
 

@@ -14,10 +14,10 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..dictionary import (CRC_SIZE, FRAME_OVERHEAD, HEADER_DTYPE, HEADER_SIZE, Dictionary,
-                          Item, PacketDef)
-from ..errors import (CrcError, EncodeError, FrameLengthError, ProtocolVersionError,
-                      UnknownPacketError)
+from ..core.dictionary import (CRC_SIZE, FRAME_OVERHEAD, HEADER_DTYPE, HEADER_SIZE, Dictionary,
+                               Item, PacketDef)
+from ..core.errors import (CrcError, EncodeError, FrameLengthError, ProtocolVersionError,
+                           UnknownPacketError)
 from .crc import RESIDUE, crc_bytes, frame_crc
 
 

@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..errors import LinkError
+from ..core.errors import LinkError
 from .endpoints import LOOPBACK_NAMES, parse_endpoint
 
 

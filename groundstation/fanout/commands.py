@@ -91,7 +91,7 @@ def _ending(viewer) -> str:
 
 
 def watch_monitor(args, dictionary) -> int:
-    from ..stop_request import StopRequest
+    from ..core.stop_request import StopRequest
 
     with StopRequest() as stop:
         viewer = open_viewer(args, dictionary)
@@ -133,7 +133,7 @@ def watch_record(args, dictionary) -> int:
     messages it refused: `framing` of the log's link records)."""
     from ..logs.live import attach_recorder, recorder_from_args
     from ..plant.testbed import load_testbed
-    from ..stop_request import StopRequest
+    from ..core.stop_request import StopRequest
 
     testbed = load_testbed(args.testbed) if args.testbed else None
     failures: list[str] = []

@@ -11,7 +11,7 @@ from __future__ import annotations
 import ipaddress
 from dataclasses import dataclass
 
-from ..errors import CommandError, GroundStationError
+from ..core.errors import CommandError, GroundStationError
 
 LOOPBACK_NAMES = {"localhost", "127.0.0.1", "::1"}
 #: a read-only console's answer to any command but ABORT (the GUI's tooltips say it too)

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..dictionary import Dictionary
+from ..core.dictionary import Dictionary
 from .c_header import header_text
 from .c_source import source_text
 

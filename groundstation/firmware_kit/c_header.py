@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import zlib
 
-from ..dictionary import CRC_SIZE, FRAME_OVERHEAD, HEADER_DTYPE, HEADER_SIZE, Dictionary, Item
+from ..core.dictionary import CRC_SIZE, FRAME_OVERHEAD, HEADER_DTYPE, HEADER_SIZE, Dictionary, Item
 from . import c_templates as T
 from .layout import (C_TYPES, Record, c_double, c_number, c_string, check_unique, comment, conversion_text,
                      default_table, hex_u, lower, macro, record)

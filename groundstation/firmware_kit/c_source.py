@@ -3,7 +3,7 @@ length rules, pack/unpack of every layout, and the default parameter table."""
 
 from __future__ import annotations
 
-from ..dictionary import Dictionary
+from ..core.dictionary import Dictionary
 from . import c_templates as T
 from .c_header import CRC_POLY_REFLECTED, Layouts
 from .layout import Record, default_table, lower, macro, record

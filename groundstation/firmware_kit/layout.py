@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..dictionary import Dictionary, Item
-from ..errors import DictionaryError
+from ..core.dictionary import Dictionary, Item
+from ..core.errors import DictionaryError
 
 #: wire type -> (C type, bytes); str/bytes are (pointer, length) pairs in C
 C_TYPES: dict[str, tuple[str, int]] = {

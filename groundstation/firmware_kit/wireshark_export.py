@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from ..dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, Item
+from ..core.dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, Item
 from .layout import C_TYPES, KitError, comment, conversion_text, lower, record
 from .wireshark_lua import READERS, WALK
 

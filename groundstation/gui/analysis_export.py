@@ -16,7 +16,7 @@ import math
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 
 FORMATS = ("csv", "json")
 

@@ -38,7 +38,7 @@ from PySide6.QtCore import QObject, Signal
 from ..analysis import log_identification as ident
 from ..analysis.log_metrics import analyze_log
 from ..analysis.log_step import LogStep, step_from_log
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..logs import LogReader
 from .analysis_live import LiveSnapshot, live_metrics
 

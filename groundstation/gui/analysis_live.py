@@ -29,7 +29,7 @@ from ..analysis.log_metrics import (CURRENTS, DEFAULT_SENSOR, METRICS, PACKET, S
                                     SENSORS, LogMetrics, TestbedFigures, figures_from_testbed,
                                     metrics_from_columns)
 from ..analysis.spectra import DEFAULT_SEGMENT_S
-from ..dictionary import PacketDef
+from ..core.dictionary import PacketDef
 from ..logs import LogReader
 from ..plant.testbed import Testbed, load_testbed
 

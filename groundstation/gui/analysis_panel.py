@@ -37,7 +37,7 @@ from PySide6.QtWidgets import (QFileDialog, QGroupBox, QHBoxLayout, QPushButton,
                                QVBoxLayout, QWidget)
 
 from .analysis_controls import BAD_STYLE, BUSY_STYLE, ActionsBox, OptionsBox
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from .analysis_export import write_bytes, write_rows
 from .analysis_jobs import BATCH_JOBS, AnalysisJobs, Batch
 from .analysis_live import live_available, take_snapshot

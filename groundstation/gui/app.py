@@ -6,7 +6,7 @@ import os
 import signal
 import sys
 
-from ..dictionary import Dictionary
+from ..core.dictionary import Dictionary
 
 
 def display_available() -> bool:

@@ -26,7 +26,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDoubleSpinBox, QFi
                                QSplitter, QTableWidget, QTableWidgetItem, QVBoxLayout, QWidget)
 
 from ..campaign import Campaign, StepResult, load_campaign
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..plant.testbed import PROFILES_DIR
 from .campaign_runner import CampaignOutcome
 from .file_combo import FilePicker

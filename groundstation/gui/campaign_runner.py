@@ -35,9 +35,9 @@ from pathlib import Path
 from PySide6.QtCore import QObject, Signal
 
 from ..campaign import ACTIONS, Campaign, CampaignReport, CampaignRunner, Step, StepResult
-from ..clock import ScriptAborted
-from ..errors import GroundStationError
-from ..scripting import Testbed
+from ..station.clock import ScriptAborted
+from ..core.errors import GroundStationError
+from ..station.station import Station as Testbed
 from ..plant.testbed import DEFAULT_TESTBED, load_testbed
 
 log = logging.getLogger(__name__)

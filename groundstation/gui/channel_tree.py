@@ -21,7 +21,7 @@ from PySide6.QtCore import QMimeData, Qt, Signal
 from PySide6.QtWidgets import (QAbstractItemView, QLineEdit, QTreeWidget, QTreeWidgetItem,
                                QVBoxLayout, QWidget)
 
-from ..dictionary import Dictionary, Item, PacketDef
+from ..core.dictionary import Dictionary, Item, PacketDef
 
 #: the item data role holding a channel id (packet rows hold None)
 ID_ROLE = Qt.ItemDataRole.UserRole

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..display_buffers import TelemetryStore, aligned_envelope, bin_factor
+from ..live.display_buffers import TelemetryStore, aligned_envelope, bin_factor
 
 WINDOW_PRESETS_S = (1, 2, 5, 10, 20, 30, 60, 120, 300, 600)
 WINDOW_MIN_S, WINDOW_MAX_S = 1.0, 600.0

@@ -17,7 +17,7 @@ from .chart_data import TIMEBASES, WINDOW_MAX_S, WINDOW_MIN_S, _window_label, ne
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QComboBox, QPushButton
 
-    from ..display_buffers import TelemetryStore
+    from ..live.display_buffers import TelemetryStore
     from .chart_column import PlotColumn
     from .chart_plot import ChartPlot
 

@@ -21,7 +21,7 @@ from .channel_tree import ChannelInfo, DisplayUnit, display_unit
 if TYPE_CHECKING:
     from PySide6.QtWidgets import QCheckBox
 
-    from ..display_buffers import TelemetryStore
+    from ..live.display_buffers import TelemetryStore
     from .chart_column import PlotColumn
 
 # the panel's logger, as these messages always were

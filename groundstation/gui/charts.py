@@ -45,8 +45,8 @@ from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtWidgets import (QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushButton,
                                QVBoxLayout, QWidget)
 
-from ..dictionary import Dictionary
-from ..display_buffers import TelemetryStore, insert_breaks
+from ..core.dictionary import Dictionary
+from ..live.display_buffers import TelemetryStore, insert_breaks
 from .channel_tree import ChannelInfo, channel_catalog, format_value
 from .chart_data import (TIMEBASES, WINDOW_MAX_S, WINDOW_MIN_S,  # noqa: F401
                          WINDOW_PRESETS_S, ChartStats, _Series, _Trace, _window_label,

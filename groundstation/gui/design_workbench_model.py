@@ -33,7 +33,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..dictionary import Dictionary, load_dictionary
+from ..core.dictionary import Dictionary, load_dictionary
 from ..params.design_file import ControllerDesign, load_design
 from ..params.design_writer import (Factored, controller_problems, factored,
                                     transfer_function_mismatch, write_design)

@@ -7,7 +7,7 @@ import logging
 import time
 from typing import Any
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from .design_workbench_model import slow_views
 
 log = logging.getLogger(__name__)

@@ -22,7 +22,7 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QGridLayout, Q
                                QHBoxLayout, QLabel, QPushButton, QSpinBox, QVBoxLayout)
 
 from ..basemotion import BaseMotionProfile, preview_spectrum
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..instruments import spec4050 as spec
 from ..plant.testbed import PROFILES_DIR
 from .file_combo import select_file

@@ -16,7 +16,7 @@ from PySide6.QtCore import Qt
 from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QGridLayout, QGroupBox, QHBoxLayout,
                                QLabel, QPushButton, QVBoxLayout)
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..instruments import spec4050 as spec
 from .fg_limits_text import limit_texts, limits_source
 from .fg_records import SIMULATOR, GeneratorState, ResourceChoice

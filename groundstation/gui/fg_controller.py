@@ -37,7 +37,7 @@ from typing import Callable
 from PySide6.QtCore import QObject, Signal
 
 from ..basemotion import BaseMotionProfile, BaseStageModel, PsdTable, load_psd, make_profile
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..instruments import (BasicWave, FunctionGenerator4050, InstrumentLinkError, SafetyLimits,
                            SettingRefusedError, list_resources, open_generator)
 from ..instruments.spec4050 import arb_name_for

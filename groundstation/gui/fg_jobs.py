@@ -22,7 +22,7 @@ import queue
 import threading
 from typing import Callable
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 
 # the controller's logger, as the worker's messages always were
 log = logging.getLogger("groundstation.gui.fg_controller")

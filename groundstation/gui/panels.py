@@ -17,7 +17,7 @@ from PySide6.QtWidgets import (QAbstractScrollArea, QCheckBox, QComboBox, QFormL
                                QTableWidgetItem, QVBoxLayout, QWidget)
 
 from ..link import format_snapshot
-from ..limits import GREEN, RED, YELLOW
+from ..live.limits import GREEN, RED, YELLOW
 from .chart_labels import SteadyLabel
 from .session import Session
 

@@ -20,8 +20,8 @@ from PySide6.QtWidgets import (QCheckBox, QFileDialog, QHBoxLayout, QInputDialog
                                QMessageBox, QProgressBar, QPushButton, QSplitter, QTextBrowser,
                                QTreeWidget, QTreeWidgetItem, QVBoxLayout, QWidget)
 
-from ..dictionary import Dictionary, ParameterDef
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary, ParameterDef
+from ..core.errors import GroundStationError
 from ..params import table as ptable
 from ..params.compare import three_way, wire_value
 from ..params.design import ControllerDesign, load_design, table_values

@@ -25,8 +25,8 @@ from PySide6.QtWidgets import (QComboBox, QGridLayout, QGroupBox, QHBoxLayout, Q
                                QMessageBox, QProgressBar, QPushButton, QSizePolicy, QVBoxLayout,
                                QWidget)
 
-from ..dictionary import Dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary
+from ..core.errors import GroundStationError
 from ..profiles import (TARGETS, Profile, ProfileCheck, ProfileSummary, check_profile,
                         default_mode, load_profile, preview, summarise)
 from ..profiles.profile import WAVEFORMS_DIR

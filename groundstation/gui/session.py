@@ -25,20 +25,20 @@ from typing import Any
 
 from PySide6.QtCore import QObject, QTimer, Signal
 
-from ..dictionary import Dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary
+from ..core.errors import GroundStationError
 from ..link import DeviceClient, open_client
 from ..logs import Recorder, ReplaySource
 from ..logs.live import attach_recorder
 from ..logs.summary import event_markers
 from .session_consoles import ConsoleMixin
 from .session_profiles import ProfilePlaybackMixin
-from ..limits import LimitMonitor
+from ..live.limits import LimitMonitor
 from ..params.upload import ParameterHistory
 from ..sim.process import SimulatorProcess
 from ..station.recording import device_record
 from ..station.station import Station
-from ..display_buffers import TelemetryStore
+from ..live.display_buffers import TelemetryStore
 from .campaign_runner import CampaignController
 from .fg_controller import GeneratorController
 from .session_commands import CommandQueue

@@ -5,7 +5,7 @@ and signals and adds none."""
 
 from __future__ import annotations
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 
 
 class ConsoleMixin:

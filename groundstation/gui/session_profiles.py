@@ -8,7 +8,7 @@ from __future__ import annotations
 import logging
 import time
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..profiles import Profile
 from .session_events import PlayOutcome
 

@@ -19,8 +19,8 @@ from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 from scipy import signal
 
-from ..dictionary import Dictionary
-from ..display_buffers import TelemetryStore
+from ..core.dictionary import Dictionary
+from ..live.display_buffers import TelemetryStore
 from .channel_tree import channel_catalog, display_unit, format_value
 from .chart_labels import SteadyLabel
 

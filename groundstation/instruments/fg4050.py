@@ -43,7 +43,7 @@ from typing import Iterable
 
 import numpy as np
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from . import spec4050 as spec
 # the records, errors and link are re-exported: callers import them from here or from
 # the package, as they did when this module held everything

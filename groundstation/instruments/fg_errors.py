@@ -4,7 +4,7 @@ refused before anything was sent (by the instrument's limits or by the testbed's
 
 from __future__ import annotations
 
-from ..errors import GroundStationError, LinkError
+from ..core.errors import GroundStationError, LinkError
 
 
 class InstrumentError(GroundStationError):

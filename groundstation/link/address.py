@@ -12,8 +12,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from urllib.parse import parse_qs, urlsplit
 
-from ..dictionary import Dictionary
-from ..errors import LinkError
+from ..core.dictionary import Dictionary
+from ..core.errors import LinkError
 from .client import DeviceClient
 from .transports import SerialStream, TcpStream, UdpReceiver
 

@@ -21,10 +21,10 @@ from typing import Any, Callable, Iterable
 
 from ..codec import DatagramDecoder, FrameCodec, StreamDeframer, TelemetryBlock
 from ..codec.frames import decode_items, encode_items
-from ..dictionary import Dictionary
-from ..errors import (CommandArgumentError, CommandFailed, CommandRejected, CommandTimeout,
-                      DictionaryMismatchError, EncodeError, GroundStationError, LinkLostError,
-                      NotConnectedError, ProtocolVersionError, SessionEndedError)
+from ..core.dictionary import Dictionary
+from ..core.errors import (CommandArgumentError, CommandFailed, CommandRejected, CommandTimeout,
+                           DictionaryMismatchError, EncodeError, GroundStationError, LinkLostError,
+                           NotConnectedError, ProtocolVersionError, SessionEndedError)
 from .intake import TelemetryIntake
 from .stats import LinkStatistics
 from .transports import StreamTransport, UdpReceiver

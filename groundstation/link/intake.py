@@ -25,8 +25,8 @@ from collections import deque
 from dataclasses import dataclass, field
 
 from ..codec import TelemetryBlock
-from ..dictionary import Dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary
+from ..core.errors import GroundStationError
 
 log = logging.getLogger(__name__)
 

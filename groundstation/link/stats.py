@@ -20,8 +20,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..codec import FramingCounters, TelemetryBlock
-from ..codec.sequence import SEQ_MOD, SequenceTracker
-from ..dictionary import default_control_rate_hz
+from ..codec.sequence import SequenceTracker
+from ..codec.ticks import TickUnwrapper
+from ..core.dictionary import default_control_rate_hz
 
 
 class ClockSync:
@@ -69,28 +70,6 @@ class ClockSync:
     @property
     def best_rtt(self) -> float | None:
         return min(self._samples)[0] if self._samples else None
-
-
-class TickUnwrapper:
-    """u32 device ticks -> monotonically continuing int64 (handles the 2^32 wrap)."""
-
-    def __init__(self) -> None:
-        self._last: int | None = None
-        self._base = 0
-
-    def unwrap(self, ticks: np.ndarray) -> np.ndarray:
-        t = ticks.astype(np.int64)
-        if not len(t):
-            return t
-        prev = np.concatenate(([self._last if self._last is not None else t[0]], t[:-1]))
-        wraps = np.cumsum(((t - prev) < -(SEQ_MOD // 2)).astype(np.int64))
-        out = t + (self._base + wraps * SEQ_MOD)
-        self._base += int(wraps[-1]) * SEQ_MOD
-        self._last = int(t[-1])
-        return out
-
-    def unwrap_scalar(self, tick: int) -> int:
-        return int(self.unwrap(np.array([tick], dtype=np.int64))[0])
 
 
 @dataclass

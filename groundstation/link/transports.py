@@ -16,7 +16,7 @@ import time
 
 import serial
 
-from ..errors import LinkError, LinkLostError, PortInUseError
+from ..core.errors import LinkError, LinkLostError, PortInUseError
 
 log = logging.getLogger(__name__)
 

@@ -42,8 +42,8 @@ import h5py
 import numpy as np
 
 from ..codec import FrameCodec, TelemetryBlock
-from ..dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, PacketDef, load_dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, PacketDef, load_dictionary
+from ..core.errors import GroundStationError
 from .opening import H5_READ_ERRORS, LogDamagedError, LogError, first_unreadable, unreadable_text
 from .reader import LogReader
 from .rows import search_sorted

@@ -24,8 +24,8 @@ from h5py import h5s
 
 from .. import __version__
 from ..codec import TelemetryBlock
-from ..dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, Item, PacketDef
-from ..link.stats import TickUnwrapper
+from ..core.dictionary import CRC_SIZE, HEADER_SIZE, Dictionary, Item, PacketDef
+from ..codec.ticks import TickUnwrapper
 from . import schema
 
 

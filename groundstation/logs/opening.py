@@ -50,7 +50,7 @@ import h5py
 import numpy as np
 from h5py import h5f, h5p
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from . import schema
 
 

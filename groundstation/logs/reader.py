@@ -30,7 +30,7 @@ from typing import Any, Iterable
 import h5py
 import numpy as np
 
-from ..dictionary import default_control_rate_hz
+from ..core.dictionary import default_control_rate_hz
 from . import schema
 from .channels import HEADER_CHANNELS, Channel, packet_channels
 from .channels import to_engineering as _to_engineering

@@ -30,8 +30,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..codec import TelemetryBlock
-from ..dictionary import Dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary
+from ..core.errors import GroundStationError
 from .messages import Closed, Failed, Flushed, Frames, JournalEntry, Started, StartFailed, Stop, Stopped
 from .schema import JOURNAL_KINDS
 from .writer import writer_main

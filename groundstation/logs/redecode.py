@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from ..codec import DatagramDecoder, FrameCodec
-from ..dictionary import Dictionary
+from ..core.dictionary import Dictionary
 from .atomic import atomic_output
 from .h5file import LogFile
 from .reader import LogError, LogReader

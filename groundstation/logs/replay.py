@@ -32,8 +32,8 @@ from typing import Any, Callable
 import numpy as np
 
 from ..codec import TelemetryBlock
-from ..dictionary import Dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary
+from ..core.errors import GroundStationError
 from ..link.stats import LinkStatistics
 # ReplayError, ReplayDamagedError, iter_blocks and MAIN_PACKET were defined here before
 # the split; callers and tests still import them from this module

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..codec.sequence import SequenceTracker
-from ..dictionary import default_control_rate_hz
+from ..core.dictionary import default_control_rate_hz
 from .opening import attr_text
 
 if TYPE_CHECKING:

@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..codec import FrameCodec
-from ..dictionary import load_dictionary
+from ..core.dictionary import load_dictionary
 from .h5file import LogFile
 from .messages import (Closed, Failed, Flushed, Frames, JournalEntry, Started, StartFailed, Stop,
                        Stopped)

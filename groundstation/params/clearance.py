@@ -27,8 +27,8 @@ import secrets
 from dataclasses import dataclass, field
 from typing import Any, Mapping
 
-from ..dictionary import Dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary
+from ..core.errors import GroundStationError
 from . import table as ptable
 
 #: only this module makes Clearances: each carries a seal over what it clears, keyed

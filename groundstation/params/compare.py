@@ -13,7 +13,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..dictionary import Dictionary, ParameterDef
+from ..core.dictionary import Dictionary, ParameterDef
 
 SOURCES = ("design", "uploaded", "device")
 

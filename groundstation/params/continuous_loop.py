@@ -37,7 +37,7 @@ PADE_ORDER = 8            # a 2.6 ms delay to within 0.1 deg well past 100 Hz
 def default_crossover_hz() -> float:
     """The complementary filter's crossover as the device's table defaults it (assumed:
     the reference gives none; protocol/parameters.toml `complementary_crossover`)."""
-    from ..dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
     from .table import default_values
 
     return float(default_values(load_dictionary())["complementary_crossover"])

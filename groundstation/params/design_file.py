@@ -51,9 +51,9 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..dictionary import Dictionary, load_dictionary
-from ..errors import GroundStationError
-from ..tomlfile import read_toml
+from ..core.dictionary import Dictionary, load_dictionary
+from ..core.errors import GroundStationError
+from ..core.tomlfile import read_toml
 from .discretise import _singular_text, discretise_design, pad_sections, singular_factors
 from .table import default_values
 from .tf_algebra import (CANCEL_TOLERANCE, CONTROL_RATE_HZ, DesignError, TransferFunction,

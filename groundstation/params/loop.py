@@ -19,7 +19,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..dictionary import Dictionary, load_dictionary
+from ..core.dictionary import Dictionary, load_dictionary
 from . import table as ptable
 from .design import (CONTROL_RATE_HZ, MATCH_BAND_HZ, ControllerDesign, DiscretisationMatch,
                      discretisation_match, match_frequencies, response_error, table_values)

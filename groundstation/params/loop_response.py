@@ -32,7 +32,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from ..dictionary import Dictionary, load_dictionary
+from ..core.dictionary import Dictionary, load_dictionary
 from ..plant import model as plant_model
 from .design import CONTROL_RATE_HZ, ControllerDesign, sos_response, table_values
 

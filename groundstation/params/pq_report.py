@@ -69,7 +69,7 @@ def summarize(design: ControllerDesign, freqs_hz=DEFAULT_FREQS_HZ,
               dictionary=None) -> DesignSummary:
     """Everything `params analyze` prints for one design.  The margins and the time
     responses use the table the design would upload (over `dictionary`'s defaults)."""
-    from ..dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
     from .design_file import table_values
     from .loop import validate
     from .loop_response import loop_model

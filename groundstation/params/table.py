@@ -12,8 +12,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..dictionary import Dictionary, ParameterDef
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary, ParameterDef
+from ..core.errors import GroundStationError
 
 
 class ParameterError(GroundStationError):

@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..dictionary import default_control_rate_hz
-from ..errors import GroundStationError
+from ..core.dictionary import default_control_rate_hz
+from ..core.errors import GroundStationError
 
 if TYPE_CHECKING:
     from .design_file import ControllerDesign

@@ -22,8 +22,8 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from ..dictionary import Dictionary
-from ..errors import CommandFailed, CommandRejected, GroundStationError
+from ..core.dictionary import Dictionary
+from ..core.errors import CommandFailed, CommandRejected, GroundStationError
 from . import table as ptable
 from .clearance import Clearance
 

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.linalg import expm
 
-from ..dictionary import default_control_rate_hz
+from ..core.dictionary import default_control_rate_hz
 from .testbed import Testbed
 
 N_STATE = 8

@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..errors import GroundStationError
-from ..tomlfile import read_toml
+from ..core.errors import GroundStationError
+from ..core.tomlfile import read_toml
 
 PROFILES_DIR = Path(__file__).resolve().parent.parent.parent / "profiles"
 TESTBEDS_DIR = PROFILES_DIR / "testbeds"

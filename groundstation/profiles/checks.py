@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..dictionary import Dictionary
+from ..core.dictionary import Dictionary
 from .samples import DEFAULT_GYRO_RANGE, Profile, ProfileRefused
 
 
@@ -60,7 +60,7 @@ def check_profile(profile: Profile, dictionary: Dictionary | None = None, *, off
     """Everything the device would refuse, found here first; `offset` is the position a
     relative profile will be added to (0 before it is known)."""
     if dictionary is None:
-        from ..dictionary import load_dictionary
+        from ..core.dictionary import load_dictionary
         dictionary = load_dictionary()
     check = ProfileCheck(profile)
     p = check.problems

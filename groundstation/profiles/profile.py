@@ -38,8 +38,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..dictionary import Dictionary
-from ..tomlfile import read_toml
+from ..core.dictionary import Dictionary
+from ..core.tomlfile import read_toml
 from . import waveforms as gen
 from .checks import ProfileCheck, check_profile, sample_range
 from .samples import (_CSV_UNITS, DEFAULT_GYRO_RANGE, RATE_HZ, TARGETS, Profile, ProfileError,

@@ -14,7 +14,7 @@ from typing import Any
 
 import numpy as np
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from . import waveforms as gen
 
 RATE_HZ = gen.RATE_HZ

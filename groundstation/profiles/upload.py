@@ -32,8 +32,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..dictionary import Dictionary
-from ..errors import CommandFailed, CommandRejected, GroundStationError, LinkLostError
+from ..core.dictionary import Dictionary
+from ..core.errors import CommandFailed, CommandRejected, GroundStationError, LinkLostError
 from .profile import DEFAULT_GYRO_RANGE, TARGETS, Profile, ProfileError, ProfileRefused, check_profile
 
 log = logging.getLogger(__name__)

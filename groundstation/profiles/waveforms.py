@@ -26,8 +26,8 @@ from typing import Sequence
 import numpy as np
 from scipy import signal
 
-from ..dictionary import default_control_rate_hz
-from ..errors import GroundStationError
+from ..core.dictionary import default_control_rate_hz
+from ..core.errors import GroundStationError
 
 #: the controller's rate, one sample per control period (the protocol dictionary's)
 RATE_HZ = default_control_rate_hz()

@@ -19,8 +19,8 @@ from typing import Any, Callable, Iterable
 import numpy as np
 
 from ..codec import FrameCodec, StreamDeframer
-from ..dictionary import Dictionary, load_dictionary
-from ..errors import LinkLostError, PortInUseError
+from ..core.dictionary import Dictionary, load_dictionary
+from ..core.errors import LinkLostError, PortInUseError
 from ..link.transports import StreamTransport, TcpStream, listening_socket
 from . import core
 from .firmware import REJECTED, Firmware

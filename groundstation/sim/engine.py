@@ -13,7 +13,7 @@ import numpy as np
 
 from . import core
 from . import friction as fr
-from ..dictionary import default_control_rate_hz
+from ..core.dictionary import default_control_rate_hz
 from ..plant.model import discrete_model
 from ..plant.testbed import Testbed
 

@@ -48,7 +48,7 @@ from typing import Callable
 
 import numpy as np
 
-from ..dictionary import default_control_rate_hz
+from ..core.dictionary import default_control_rate_hz
 from ..instruments import spec4050 as spec
 
 # the logger the instrument has always logged under (before the split into modules)

@@ -19,8 +19,8 @@ from typing import Any
 import numpy as np
 
 from ..codec.frames import decode_items, encode_items
-from ..dictionary import CommandDef, Dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import CommandDef, Dictionary
+from ..core.errors import GroundStationError
 from ..params import table as ptable
 from . import core
 from . import friction as fr

@@ -73,7 +73,7 @@ from dataclasses import dataclass, field
 import numba
 import numpy as np
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 # the table is the testbed's fact (plant/); the models below integrate it
 from ..plant.slope_table import DEFAULT_SLOPE_TABLE, load_slope_table, validate_slope_table
 

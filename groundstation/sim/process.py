@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 
-from ..errors import LinkError
+from ..core.errors import LinkError
 
 ANNOUNCE = "LISTENING "
 FG_ANNOUNCE = "FG_LISTENING "       # the function generator's line (sim --fg-port)

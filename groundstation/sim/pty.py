@@ -11,7 +11,7 @@ import os
 import select
 import tty
 
-from ..errors import LinkLostError
+from ..core.errors import LinkLostError
 from ..link.transports import StreamTransport
 
 

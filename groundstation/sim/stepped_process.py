@@ -49,7 +49,7 @@ from multiprocessing.connection import Connection
 from pathlib import Path
 from typing import Callable
 
-from ..errors import LinkError, LinkLostError
+from ..core.errors import LinkError, LinkLostError
 
 #: how long a request may go unanswered before the child counts as hung
 REPLY_TIMEOUT_S = 30.0
@@ -265,7 +265,7 @@ class SteppedSimulatorProcess:
 
 # ---------------------------------------------------------------------- the child
 def _serve(conn: Connection, testbed: str, seed: int, generator: bool, host: str) -> None:
-    from ..dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
     from ..plant.testbed import load_testbed
     from .device import SimulatedDevice
     from .firmware import Firmware

@@ -13,8 +13,8 @@ import threading
 from dataclasses import dataclass
 from typing import Callable
 
-from ..dictionary import Dictionary
-from ..errors import GroundStationError
+from ..core.dictionary import Dictionary
+from ..core.errors import GroundStationError
 from ..link.client import DeviceClient
 
 log = logging.getLogger(__name__)

@@ -12,7 +12,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
-from ..errors import GroundStationError
+from ..core.errors import GroundStationError
 from ..logs import Recorder
 from ..logs.live import attach_recorder
 from ..params.upload import ParameterLoader

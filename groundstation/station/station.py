@@ -42,10 +42,10 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from ..clock import FastPacing, ScriptAborted, SteppedClock, WallClock
-from ..contracts import BaseMotionInstrument
-from ..dictionary import Dictionary, load_dictionary
-from ..errors import GroundStationError
+from .clock import FastPacing, ScriptAborted, SteppedClock, WallClock
+from ..core.contracts import BaseMotionInstrument
+from ..core.dictionary import Dictionary, load_dictionary
+from ..core.errors import GroundStationError
 from ..link import open_client
 from ..link.client import DeviceClient
 from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
@@ -112,7 +112,7 @@ class Station(GeneratorVerbs):
         self.testbed = load_testbed(self.testbed_path)
         self.abort_event = threading.Event()
         self.state = DeviceStateTracker()
-        #: the device link: a CommandChannel and a TelemetrySource (contracts.py)
+        #: the device link: a CommandChannel and a TelemetrySource (core/contracts.py)
         self.client: DeviceClient | None = None
         self.address = ""
         self.clock: WallClock | SteppedClock | None = None

@@ -44,7 +44,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-from .errors import GroundStationError
+from ..core.errors import GroundStationError
 
 if TYPE_CHECKING:
     import numpy as np
@@ -54,7 +54,7 @@ DEFAULT_TOLERANCE = 0.10
 
 
 def _default_testbed() -> Path:
-    from .plant.testbed import TESTBEDS_DIR
+    from ..plant.testbed import TESTBEDS_DIR
 
     return TESTBEDS_DIR / "inertial_2dof.toml"
 
@@ -63,8 +63,8 @@ def _default_testbed() -> Path:
 def _generator(args, testbed, on_sim=None):
     """The opened generator (and the simulated testbed behind `--resource sim`; once the
     generator is open, the testbed's command address goes to `on_sim`)."""
-    from .instruments import SafetyLimits, open_generator
-    from .sim.process import SimulatorProcess
+    from ..instruments import SafetyLimits, open_generator
+    from ..sim.process import SimulatorProcess
 
     sim = None
     resource, backend = args.resource, args.backend
@@ -91,7 +91,7 @@ def _generator(args, testbed, on_sim=None):
 
 
 def _testbed(args):
-    from .plant.testbed import load_testbed
+    from ..plant.testbed import load_testbed
 
     return load_testbed(args.testbed or _default_testbed())
 
@@ -126,7 +126,7 @@ def _hold(fg, channel: int, seconds: float | None, marks: list | None = None,
 
 
 def _cmd_list(args) -> int:
-    from .instruments import list_resources
+    from ..instruments import list_resources
 
     listing = list_resources(args.backend, args.query)
     if listing.resources:
@@ -168,7 +168,7 @@ def _cmd_set(args) -> int:
 
 def _profile(args, testbed, duration_s: float | None = None, seed: int | None = None,
              rms_mrad: float | None = None, precompensate: bool | None = None):
-    from .basemotion import load_profile
+    from ..basemotion import load_profile
 
     # the command line first, then what the log's journal says was uploaded, then defaults
     rms = args.rms_mrad if args.rms_mrad is not None else rms_mrad
@@ -188,7 +188,7 @@ class _BaseEncoder:
     device times (unwrapped ticks / control rate) - all a check needs, at 16 bytes a frame."""
 
     def __init__(self, rate_hz: float, keep_s: float):
-        from .link.stats import TickUnwrapper
+        from ..codec.ticks import TickUnwrapper
 
         self.rate = rate_hz
         self.keep = int(keep_s * rate_hz)
@@ -228,7 +228,7 @@ class _BaseEncoder:
 
 def _report(check, window, tolerance: float, csv_path: str | None) -> int:
     """Print the comparison; write the CSP curves; 0 within tolerance, 1 not."""
-    from .basemotion import band_rms
+    from ..basemotion import band_rms
 
     lo, hi = check.band_hz
     print(f"window: device time {window.start_s:.3f} .. {window.end_s:.3f} s "
@@ -270,7 +270,7 @@ def _write_csp(path: str, check) -> None:
 
 
 def _cmd_upload(args) -> int:
-    from .instruments.spec4050 import arb_name_for
+    from ..instruments.spec4050 import arb_name_for
 
     testbed = _testbed(args)
     profile = _profile(args, testbed)
@@ -293,8 +293,8 @@ def _cmd_upload(args) -> int:
     watch: dict = {}
 
     def start_watching(address: str) -> None:
-        from .dictionary import load_dictionary
-        from .link import open_client
+        from ..core.dictionary import load_dictionary
+        from ..link import open_client
 
         d = load_dictionary(args.protocol_dir)
         enc = _BaseEncoder(d.control_rate_hz, profile.duration_s + settle + 30.0)
@@ -330,7 +330,7 @@ def _cmd_upload(args) -> int:
                 stop_watching()               # before the simulator it watches stops
         if not args.check:
             return 0
-        from .basemotion import check_record
+        from ..basemotion import check_record
 
         enc = watch["encoder"]
         if len(marks) < 2 or None in marks:
@@ -348,7 +348,7 @@ def _cmd_upload(args) -> int:
 def _journal_motion(reader):
     """From the log's journal of the function generator (written by the GUI): the last
     upload's settings and the device times where its motion started and stopped."""
-    from .logs.reader import LogQueryError
+    from ..logs.reader import LogQueryError
 
     try:
         records = reader.journal("function_generator")
@@ -394,8 +394,8 @@ def _host_to_device(reader, host_time: float) -> float | None:
 def _cmd_check(args) -> int:
     import numpy as np
 
-    from .basemotion import check_record
-    from .logs import LogReader
+    from ..basemotion import check_record
+    from ..logs import LogReader
 
     testbed = _testbed(args)
     with LogReader(args.log) as reader:

@@ -47,8 +47,8 @@ def command_station(args, dictionary, testbed: str | None = None) -> Iterator:
     """An open Station for one CLI command: no function generator, the parameter history
     from --history (if the command has one), closed (not made safe: a command that moved
     the rig makes it safe itself) on the way out."""
-    from .params.upload import ParameterHistory
-    from .station.station import Station
+    from ..params.upload import ParameterHistory
+    from ..station.station import Station
 
     history = None
     if hasattr(args, "history"):

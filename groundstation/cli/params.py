@@ -23,8 +23,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .cli_station import add_device_options, command_station, fail, print_progress
-from .errors import GroundStationError
+from .station import add_device_options, command_station, fail, print_progress
+from ..core.errors import GroundStationError
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
 
@@ -51,9 +51,9 @@ def _add_validate(actions) -> None:
 
 
 def _cmd_validate(args) -> int:
-    from .dictionary import load_dictionary
-    from .params.design import load_design, table_values
-    from .params.loop import report_lines, validate
+    from ..core.dictionary import load_dictionary
+    from ..params.design import load_design, table_values
+    from ..params.loop import report_lines, validate
 
     try:
         design = load_design(args.file)
@@ -98,14 +98,14 @@ def _add_rollback(actions) -> None:
 
 
 def load_dictionary_for(args):
-    from .dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
     return load_dictionary(args.protocol_dir)
 
 
 def _cmd_upload(args) -> int:
-    from .params.clearance import ValidationRefused
-    from .params.design import load_design, table_values
-    from .params.loop import report_lines, validate
+    from ..params.clearance import ValidationRefused
+    from ..params.design import load_design, table_values
+    from ..params.loop import report_lines, validate
 
     try:
         design = load_design(args.file)
@@ -141,10 +141,10 @@ def _cmd_upload(args) -> int:
 
 
 def _cmd_show(args) -> int:
-    from .params.compare import format_rows, three_way
-    from .params.upload import provenance
-    from .params.design import load_design, table_values
-    from .params import table as ptable
+    from ..params.compare import format_rows, three_way
+    from ..params.upload import provenance
+    from ..params.design import load_design, table_values
+    from ..params import table as ptable
 
     design_values = None
     testbed = None
@@ -240,9 +240,9 @@ def _add_analyze(actions) -> None:
 
 
 def _cmd_analyze(args) -> int:
-    from .params.design import load_design
-    from .params.pq_report import summarize, summary_lines
-    from .params.pq_response import DisturbanceError, parse_disturbance
+    from ..params.design import load_design
+    from ..params.pq_report import summarize, summary_lines
+    from ..params.pq_response import DisturbanceError, parse_disturbance
 
     try:
         freqs = [float(x) for x in args.freqs.split(",") if x.strip()]
@@ -270,7 +270,7 @@ def _cmd_analyze(args) -> int:
     for line in summary_lines(summaries):
         print(line)
     if args.plot:
-        from .params.pq_plot import write_figure
+        from ..params.pq_plot import write_figure
 
         try:
             out = write_figure(summaries, args.plot)

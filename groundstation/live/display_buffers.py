@@ -29,10 +29,10 @@ from typing import Callable
 
 import numpy as np
 
-from .codec import TelemetryBlock
-from .dictionary import Dictionary, PacketDef
-from .codec.sequence import SequenceTracker
-from .link.stats import TickUnwrapper
+from ..codec import TelemetryBlock
+from ..core.dictionary import Dictionary, PacketDef
+from ..codec.sequence import SequenceTracker
+from ..codec.ticks import TickUnwrapper
 
 #: device time going back by more than this between frames is a reboot, not reordering
 RESTART_BACKSTEP_S = 1.0

@@ -71,7 +71,7 @@ def __getattr__(name: str):
     # code that fills a row (analysis/batch_rows.py, numpy); read on first use so that
     # parsing stays standard-library only
     if name == "ROW_KEYS":
-        from .analysis.batch_rows import ROW_KEYS
+        from ..analysis.batch_rows import ROW_KEYS
         return ROW_KEYS
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
@@ -223,9 +223,9 @@ def _cmd_analyze(args) -> int:
     if args.table or args.scheduler or args.workers or args.serial:
         return _cmd_batch(args)
     args.logs = _expand(args.logs)
-    from .analysis.log_metrics import analyze_log
-    from .errors import GroundStationError
-    from .plant.testbed import load_testbed
+    from ..analysis.log_metrics import analyze_log
+    from ..core.errors import GroundStationError
+    from ..plant.testbed import load_testbed
 
     testbed = load_testbed(args.testbed) if args.testbed else None    # a bad file: exit 2
     extras = tuple(m for m in args.metrics if m in EXTRA_METRICS)
@@ -254,7 +254,7 @@ def _cmd_analyze(args) -> int:
     rows = [_row(name, m, error, ex, args.max_excluded_fraction)
             for (name, m, error), ex in zip(results, extra_results)]
     if args.json or args.csv:
-        from .analysis.batch_rows import ROW_KEYS
+        from ..analysis.batch_rows import ROW_KEYS
         _print_rows(rows, ROW_KEYS, args.json)
     else:
         if metrics:
@@ -287,10 +287,10 @@ def _cmd_batch(args) -> int:
     if args.serial and args.scheduler not in (None, "none"):
         print(f"error: --serial and --scheduler {args.scheduler}: choose one", file=sys.stderr)
         return 2
-    from .analysis.batch import (TABLE_KEYS, BatchOptions, campaign_reports, default_workers,
-                                 find_logs, run_serial)
-    from .analysis.batch_table import write_table
-    from .plant.testbed import load_testbed
+    from ..analysis.batch import (TABLE_KEYS, BatchOptions, campaign_reports, default_workers,
+                                  find_logs, run_serial)
+    from ..analysis.batch_table import write_table
+    from ..plant.testbed import load_testbed
 
     if args.testbed:
         load_testbed(args.testbed)                   # a bad file: exit 2 here, not per log
@@ -314,7 +314,7 @@ def _cmd_batch(args) -> int:
     if scheduler == "none":
         rows = run_serial(paths, options, known, progress)
     else:
-        from .analysis.batch_dask import run_dask
+        from ..analysis.batch_dask import run_dask
         if not args.verbose:
             # distributed logs every start and stop of its scheduler and workers at INFO;
             # the progress bar is what an operator wants to see (-v shows them)
@@ -371,7 +371,7 @@ class _ProgressBar:
 
 def _extras(name: str, extras: tuple[str, ...], args, testbed) -> dict:
     """{metric: result, or the error message} of the extra metrics of one log."""
-    from .analysis.batch_rows import extra_results
+    from ..analysis.batch_rows import extra_results
 
     return extra_results(name, extras, start_s=args.start, stop_s=args.stop,
                          frf_input=args.frf_input, frf_output=args.frf_output, testbed=testbed,
@@ -382,8 +382,8 @@ def _write_slope_tables(out: Path, logs: list[str], extra_results: list[dict]) -
     """Write the slope table of each log whose hysteresis identified one: to `out` for a
     single log, to out's stem + _<log stem> for several.  A log without one is left alone
     (its row says why); an unwritable file becomes the log's hysteresis error."""
-    from .analysis.friction_id import write_slope_table
-    from .errors import GroundStationError
+    from ..analysis.friction_id import write_slope_table
+    from ..core.errors import GroundStationError
 
     for name, ex in zip(logs, extra_results):
         h = ex.get("hysteresis")
@@ -402,8 +402,8 @@ def _write_slope_tables(out: Path, logs: list[str], extra_results: list[dict]) -
 
 
 def _row(name: str, m, error: str, ex: dict, max_excluded_fraction: float | None = None) -> dict:
-    from .analysis.batch_rows import log_row
-    from .analysis.validity import MAX_EXCLUDED_FRACTION
+    from ..analysis.batch_rows import log_row
+    from ..analysis.validity import MAX_EXCLUDED_FRACTION
 
     return log_row(name, m, error, ex, MIN_COHERENCE,
                    MAX_EXCLUDED_FRACTION if max_excluded_fraction is None else max_excluded_fraction)

@@ -45,7 +45,7 @@ def default_protocol_dir() -> Path:
     env = os.environ.get("GROUNDSTATION_PROTOCOL_DIR")
     if env:
         return Path(env)
-    return Path(__file__).resolve().parent.parent / "protocol"
+    return Path(__file__).resolve().parents[2] / "protocol"       # repo/groundstation/core/
 
 
 @dataclass(frozen=True)

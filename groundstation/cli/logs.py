@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from .errors import GroundStationError
+from ..core.errors import GroundStationError
 
 
 RECORD_EPILOG = """exit status: 0 the recording ended as asked (--duration, Ctrl-C or SIGTERM: the
@@ -19,13 +19,13 @@ link is reopened with back-off (1, 2, 4, 8, then every 10 s); the log records th
 
 
 def _cmd_record(args) -> int:
-    from .dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
 
-    from .link import format_snapshot
-    from .station.keeper import EXIT_REFUSED, LinkKeeper
-    from .logs.live import attach_recorder, recorder_from_args
-    from .plant.testbed import load_testbed
-    from .stop_request import StopRequest
+    from ..link import format_snapshot
+    from ..station.keeper import EXIT_REFUSED, LinkKeeper
+    from ..logs.live import attach_recorder, recorder_from_args
+    from ..plant.testbed import load_testbed
+    from ..core.stop_request import StopRequest
 
     d = load_dictionary(args.protocol_dir)
     testbed = load_testbed(args.testbed) if args.testbed else None
@@ -62,7 +62,7 @@ def _cmd_record(args) -> int:
 def _record_loop(args, rec, keeper, client, stop, failures, format_snapshot) -> tuple[int, str]:
     """Print the status once a second until the recording should end; returns the exit
     status and the reason the log is closed with."""
-    from .station.keeper import EXIT_FAILED, EXIT_OK
+    from ..station.keeper import EXIT_FAILED, EXIT_OK
 
     def journal(state: str, message: str) -> None:
         rec.record("event", {"source": "link", "state": state, "message": message})
@@ -108,12 +108,12 @@ def _check_testbed(client, testbed, rec) -> None:
 
 
 def _cmd_log(args) -> int:
-    from .dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
 
-    from .logs import LogReader
+    from ..logs import LogReader
 
     if args.action == "check":
-        from .logs.check import check_log
+        from ..logs.check import check_log
         result = check_log(args.file)
         try:
             print(result.format(), flush=True)
@@ -151,7 +151,7 @@ def _cmd_log(args) -> int:
         out = Path(args.output) if args.output else Path(args.file).with_suffix(
             ".csv" if args.format == "csv" else ".mat")
         channels = args.channels.split(",") if args.channels else None
-        from .logs.export import export
+        from ..logs.export import export
         with LogReader(args.file, salvage=args.salvage) as r:
             res = export(r, out, args.packet, args.format, channels, start=args.start,
                          stop=args.stop, timebase=args.timebase, relative=args.relative,
@@ -163,7 +163,7 @@ def _cmd_log(args) -> int:
         print(f"wrote {res.rows} rows of {args.packet} to {out}")
         return 0
     if args.action == "redecode":
-        from .logs.redecode import redecode
+        from ..logs.redecode import redecode
         counts = redecode(args.file, args.output, load_dictionary(args.protocol_dir))
         print(f"wrote {args.output}: " + ", ".join(f"{k} {v}" for k, v in counts.items()))
         return 0
@@ -171,14 +171,14 @@ def _cmd_log(args) -> int:
 
 
 def _cmd_replay(args) -> int:
-    from .dictionary import load_dictionary
+    from ..core.dictionary import load_dictionary
 
-    from .gui.app import display_available
-    from .link import format_snapshot
-    from .logs import ReplaySource
+    from ..gui.app import display_available
+    from ..link import format_snapshot
+    from ..logs import ReplaySource
 
     if not args.headless and display_available():
-        from .gui.app import run_gui
+        from ..gui.app import run_gui
         return run_gui(load_dictionary(args.protocol_dir), connect=None, replay=args.file)
 
     speed = None if args.speed == "max" else float(args.speed)

@@ -13,8 +13,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .codec import TelemetryBlock
-from .dictionary import Dictionary
+from ..codec import TelemetryBlock
+from ..core.dictionary import Dictionary
 
 GREEN, YELLOW, RED = 0, 1, 2
 

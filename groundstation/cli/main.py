@@ -6,13 +6,13 @@
     groundstation protocol info|check      the protocol dictionary
     groundstation protocol export-c DIR    the firmware kit: C header and reference codec
     groundstation protocol export-wireshark FILE.lua   ... and a Wireshark/tshark dissector
-    groundstation record --folder logs     record a session to HDF5 (see cli_logs.py)
-    groundstation params validate|upload|show|rollback   controller designs (see cli_params.py)
-    groundstation profile show|play FILE   command profiles (see cli_profile.py)
-    groundstation campaign show|run FILE   scripted test campaigns, scored and compared (cli_campaign.py)
+    groundstation record --folder logs     record a session to HDF5 (see cli/logs.py)
+    groundstation params validate|upload|show|rollback   controller designs (see cli/params.py)
+    groundstation profile show|play FILE   command profiles (see cli/profile.py)
+    groundstation campaign show|run FILE   scripted test campaigns, scored and compared (cli/campaign.py)
     groundstation campaign report REPORT.json   the metrics, charts and HTML again from the logs
-    groundstation fg list|identify|set|upload|off   the base-motion generator (cli_fg.py)
-    groundstation analyze LOG...           jitter, control energy, PSD of logs (cli_analysis.py)
+    groundstation fg list|identify|set|upload|off   the base-motion generator (cli/fg.py)
+    groundstation analyze LOG...           jitter, control energy, PSD of logs (cli/analysis.py)
     groundstation gui|monitor|record --watch tcp://HOST:PORT   a read-only console (fanout/)
     groundstation gui|monitor --publish tcp://127.0.0.1:PORT   ... fed by the commanding station
     groundstation fanout keys DIR [--name NAME]   CURVE keys for consoles beyond loopback
@@ -28,14 +28,20 @@ import sys
 import threading
 import time
 
-from . import __version__, cli_analysis, cli_campaign, cli_fg, cli_logs, cli_params, cli_profile
-from .errors import GroundStationError
+from . import analysis as cli_analysis
+from . import campaign as cli_campaign
+from . import fg as cli_fg
+from . import logs as cli_logs
+from . import params as cli_params
+from . import profile as cli_profile
+from .. import __version__
+from ..core.errors import GroundStationError
 
 
 def load_dictionary(protocol_dir=None):
     """The protocol dictionary, imported when a command needs it (numpy comes with it:
     `groundstation --help` must not wait for that)."""
-    from .dictionary import load_dictionary as load
+    from ..core.dictionary import load_dictionary as load
 
     return load(protocol_dir)
 
@@ -68,7 +74,7 @@ def _export_kit(args, d) -> int:
         what = "a directory" if args.action == "export-c" else "a .lua file"
         print(f"error: protocol {args.action} needs {what} to write to", file=sys.stderr)
         return 2
-    from .firmware_kit import export_c, export_wireshark
+    from ..firmware_kit import export_c, export_wireshark
 
     if args.action == "export-c":
         paths = export_c(d, args.target)
@@ -81,8 +87,8 @@ def _export_kit(args, d) -> int:
 
 
 def _cmd_sim(args) -> int:
-    from .sim import SimulatedDevice
-    from .plant.testbed import load_testbed
+    from ..sim import SimulatedDevice
+    from ..plant.testbed import load_testbed
 
     stop = threading.Event()
     # Ctrl-C and SIGTERM both ask for a clean stop, whenever they come (even during start)
@@ -96,8 +102,8 @@ def _cmd_sim(args) -> int:
     dev.start()
     fg = None
     if args.fg_port is not None:          # the base-stage function generator (SCPI on TCP)
-        from .sim.process import FG_ANNOUNCE
-        from .sim.scpi_fg import attach_generator
+        from ..sim.process import FG_ANNOUNCE
+        from ..sim.scpi_fg import attach_generator
 
         try:
             fg = attach_generator(dev, host=args.host, port=args.fg_port)
@@ -116,7 +122,7 @@ def _cmd_sim(args) -> int:
         if fg is not None:
             print(f"function generator on {fg.resource} (VISA resource for pyvisa-py)", flush=True)
     if args.pty:
-        from .sim.pty import PtyMasterStream
+        from ..sim.pty import PtyMasterStream
 
         pty = PtyMasterStream()
         dev.attach_stream(pty)
@@ -137,15 +143,15 @@ def _cmd_sim(args) -> int:
 def _cmd_monitor(args) -> int:
     """Exit status as for `record`: 0 ended as asked, 1 link lost with --no-reconnect,
     2 could not connect, 3 the session was taken over by another station."""
-    from .link import format_snapshot
-    from .station.keeper import LinkKeeper
-    from .stop_request import StopRequest
+    from ..link import format_snapshot
+    from ..station.keeper import LinkKeeper
+    from ..core.stop_request import StopRequest
 
     d = load_dictionary(args.protocol_dir)
     if getattr(args, "watch", None):
-        from .fanout.commands import watch_monitor
+        from ..fanout.commands import watch_monitor
         return watch_monitor(args, d)
-    from .fanout.commands import start_publisher
+    from ..fanout.commands import start_publisher
 
     publisher = start_publisher(args)
 
@@ -191,7 +197,7 @@ def _cmd_monitor(args) -> int:
 
 def _cmd_run(args) -> int:
     """The main job: the window on the simulated testbed, or a headless view without a screen."""
-    from .gui.app import display_available, run_gui
+    from ..gui.app import display_available, run_gui
 
     if display_available():
         return run_gui(load_dictionary(args.protocol_dir), connect="sim", testbed=args.testbed)
@@ -202,7 +208,7 @@ def _cmd_run(args) -> int:
 
 
 def _cmd_gui(args) -> int:
-    from .gui.app import run_gui
+    from ..gui.app import run_gui
 
     connect = None if args.device == "none" else args.device
     return run_gui(load_dictionary(args.protocol_dir), connect=connect, testbed=args.testbed,
@@ -211,13 +217,13 @@ def _cmd_gui(args) -> int:
 
 
 def _cmd_watch_record(args) -> int:
-    from .fanout.commands import watch_record
+    from ..fanout.commands import watch_record
 
     return watch_record(args, load_dictionary(args.protocol_dir))
 
 
 def _cmd_fanout(args) -> int:
-    from .fanout.commands import make_keys
+    from ..fanout.commands import make_keys
 
     return make_keys(args)
 

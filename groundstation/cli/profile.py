@@ -17,8 +17,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from .cli_station import add_device_options, fail, print_progress
-from .errors import GroundStationError
+from .station import add_device_options, fail, print_progress
+from ..core.errors import GroundStationError
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
 MODES = ("OPEN_LOOP", "RELATIVE", "INERTIAL")
@@ -65,17 +65,17 @@ def _add_play(actions) -> None:
 
 
 def _gyro_range(args) -> float:
-    from .profiles.profile import DEFAULT_GYRO_RANGE
+    from ..profiles.profile import DEFAULT_GYRO_RANGE
     if not args.testbed:
         return DEFAULT_GYRO_RANGE
-    from .plant.testbed import load_testbed
+    from ..plant.testbed import load_testbed
     return float(load_testbed(args.testbed).sensors["gyro_range"])
 
 
 def _load(args):
     """(profile, check) or an exit code for an unreadable file."""
-    from .dictionary import load_dictionary
-    from .profiles.profile import ProfileFileError, check_profile, load_profile
+    from ..core.dictionary import load_dictionary
+    from ..profiles.profile import ProfileFileError, check_profile, load_profile
 
     try:
         dictionary = load_dictionary(args.protocol_dir)
@@ -89,7 +89,7 @@ def _load(args):
 
 
 def _cmd_show(args) -> int:
-    from .profiles.profile import sample_range, summarise, write_csv
+    from ..profiles.profile import sample_range, summarise, write_csv
 
     loaded = _load(args)
     if isinstance(loaded, int):
@@ -152,8 +152,8 @@ def _safety(player) -> str:
 
 
 def _cmd_play(args) -> int:
-    from .cli_station import command_station
-    from .profiles.upload import default_mode
+    from .station import command_station
+    from ..profiles.upload import default_mode
 
     loaded = _load(args)
     if isinstance(loaded, int):

@@ -26,7 +26,7 @@ import sys
 import time
 from pathlib import Path
 
-from .errors import GroundStationError
+from ..core.errors import GroundStationError
 
 EXIT_OK, EXIT_FAILED, EXIT_MALFORMED = 0, 1, 2
 EXIT_INTERRUPTED = 130            # 128 + SIGINT, as a shell reports Ctrl-C
@@ -125,8 +125,8 @@ def _positive_seconds(text: str) -> float:
 
 
 def _cmd_show(args) -> int:
-    from .campaign import read_campaign
-    from .dictionary import load_dictionary
+    from ..campaign import read_campaign
+    from ..core.dictionary import load_dictionary
 
     try:
         c, problems = read_campaign(args.file, load_dictionary(getattr(args, "protocol_dir", None)))
@@ -160,7 +160,7 @@ def _print_problems(exc: GroundStationError) -> None:
 def _short(key: str, v) -> str:
     """A file reference by its name (the full path is in the campaign file); any other
     value as it is, slashes and all."""
-    from .campaign import PATH_KEYS
+    from ..campaign import PATH_KEYS
 
     text = str(v)
     return Path(text).name if key in PATH_KEYS and isinstance(v, str) else text
@@ -189,8 +189,8 @@ class _Progress:
 def _on_testbed(campaign, testbed: Path, dictionary):
     """The campaign on another testbed file, checked against that file's limits as the
     campaign's own would be (CampaignError listing the problems)."""
-    from .campaign import CampaignError
-    from .campaign.reading import check_campaign
+    from ..campaign import CampaignError
+    from ..campaign.reading import check_campaign
 
     if not testbed.is_file():
         raise CampaignError(f"--testbed: no file {testbed}")
@@ -202,10 +202,10 @@ def _on_testbed(campaign, testbed: Path, dictionary):
 
 
 def _cmd_run(args) -> int:
-    from .campaign import CampaignReport, CampaignRunner, load_campaign
-    from .campaign.run_setup import resolve_setup
-    from .dictionary import load_dictionary
-    from .scripting import Testbed
+    from ..campaign import CampaignReport, CampaignRunner, load_campaign
+    from ..campaign.run_setup import resolve_setup
+    from ..core.dictionary import load_dictionary
+    from ..station.station import Station as Testbed
 
     given = {k: getattr(args, k) for k in ("device", "fast", "fast_sim", "seed", "testbed", "log_folder")
              if getattr(args, k) is not None}
@@ -219,7 +219,7 @@ def _cmd_run(args) -> int:
         if setup["testbed"]:
             c = _on_testbed(c, Path(setup["testbed"]), dictionary)
         if args.publish:                # refused before the rig is touched, not after
-            from .fanout.endpoints import check_bind
+            from ..fanout.endpoints import check_bind
             check_bind(args.publish, have_keys=bool(args.curve_keys))
     except GroundStationError as exc:
         _print_problems(exc)
@@ -275,7 +275,7 @@ def _write_metrics(report, report_path: Path, campaign, *, html_only: bool = Fal
                    folder: Path | None = None):
     """Score the report's logs and write the outputs beside it; the metrics, or None
     when they could not be written (said why)."""
-    from .campaign.metrics import campaign_metrics, write_metrics
+    from ..campaign.metrics import campaign_metrics, write_metrics
 
     t0 = time.monotonic()
     try:
@@ -291,8 +291,8 @@ def _write_metrics(report, report_path: Path, campaign, *, html_only: bool = Fal
 
 
 def _cmd_report(args) -> int:
-    from .campaign import CampaignReport, read_campaign
-    from .dictionary import load_dictionary
+    from ..campaign import CampaignReport, read_campaign
+    from ..core.dictionary import load_dictionary
 
     report_path = Path(args.report)
     try:

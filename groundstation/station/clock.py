@@ -43,7 +43,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
-from .errors import GroundStationError, LinkLostError
+from ..core.errors import GroundStationError, LinkLostError
 
 #: device periods per chunk of a fast advance: 0.75 s, inside the 1 s watchdog even
 #: counting the HEARTBEAT's own round trip
