@@ -74,7 +74,7 @@ def strip_chart(qtbot, dictionary):
     """Make a strip-chart panel on (offscreen) screen with its refresh timer stopped, so
     the test refreshes by hand: strip_chart(store_seconds, (width, height))."""
     from groundstation.live.display_buffers import TelemetryStore
-    from groundstation.gui.charts import StripChartPanel
+    from groundstation.gui.charts.panel import StripChartPanel
 
     def make(seconds: float, size: tuple[int, int]):
         panel = StripChartPanel(TelemetryStore(dictionary, seconds=seconds), dictionary)
@@ -114,7 +114,7 @@ def gui_window(qtbot, dictionary, tmp_path):
     from PySide6.QtCore import QSettings
 
     from groundstation.gui.main_window import MainWindow
-    from groundstation.gui.session import Session
+    from groundstation.gui.session.session import Session
 
     sessions = []
 

@@ -176,7 +176,7 @@ def test_the_simulated_instrument_takes_inside_and_refuses_outside(index, load, 
 # ------------------------------------------------------------------ the GUI
 @pytest.mark.parametrize("load", spec.LOADS)
 def test_the_gui_limit_texts_show_the_tables_numbers(load):
-    from groundstation.gui.fg_controller import limit_texts
+    from groundstation.gui.generator.controller import limit_texts
 
     for row in spec.LIMITS:
         low, high = row.bounds(load)
@@ -195,9 +195,9 @@ def test_the_gui_limit_texts_show_the_tables_numbers(load):
 
 
 def test_the_panel_shows_the_texts_next_to_its_fields(qtbot, dictionary, tmp_path):
-    from groundstation.gui.fg_panel import GeneratorPanel
-    from groundstation.gui.fg_controller import limit_texts
-    from groundstation.gui.session import Session
+    from groundstation.gui.generator.panel import GeneratorPanel
+    from groundstation.gui.generator.controller import limit_texts
+    from groundstation.gui.session.session import Session
 
     session = Session(dictionary, store_seconds=10.0, param_history=tmp_path / "params")
     try:

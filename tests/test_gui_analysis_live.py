@@ -21,8 +21,8 @@ from groundstation.analysis.jitter import sensor_valid
 from groundstation.analysis.log_metrics import frame_steps, missing_before
 from groundstation.codec import FrameCodec, StreamDeframer
 from groundstation.live.display_buffers import TelemetryStore
-from groundstation.gui.analysis_live import LiveSnapshot, live_metrics, take_snapshot
-from groundstation.gui.analysis_tables import METRIC_COLUMNS, VALUE_ROLE
+from groundstation.gui.analysis.live import LiveSnapshot, live_metrics, take_snapshot
+from groundstation.gui.analysis.tables import METRIC_COLUMNS, VALUE_ROLE
 from groundstation.plant.testbed import load_testbed
 from groundstation.sim import SimulatedDevice
 

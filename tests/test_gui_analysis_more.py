@@ -21,9 +21,9 @@ from PySide6.QtWidgets import QApplication
 from groundstation import Testbed
 from groundstation.analysis import analyze_log
 from groundstation.analysis.log_step import step_from_log
-from groundstation.gui import analysis_jobs
-from groundstation.gui.analysis_export import ExportError, rows_csv, rows_json, write_rows
-from groundstation.gui.analysis_tables import METRIC_COLUMNS, STEP_COLUMNS, step_row
+from groundstation.gui.analysis import jobs as analysis_jobs
+from groundstation.gui.analysis.export import ExportError, rows_csv, rows_json, write_rows
+from groundstation.gui.analysis.tables import METRIC_COLUMNS, STEP_COLUMNS, step_row
 
 ROOT = Path(__file__).resolve().parent.parent
 TESTBED = ROOT / "profiles/testbeds/relative_2dof.toml"
@@ -363,7 +363,7 @@ def test_the_measured_phase_is_drawn_about_the_model_so_no_noisy_bin_costs_a_tur
     degrees except one wild bin (an antiresonance): drawn about the model, every other
     bin stays within those degrees of the model's unwrapped phase - unwrapping the
     measurement alone would carry the wild bin's turn into everything after it."""
-    from groundstation.gui.analysis_plots import _phase_about_model
+    from groundstation.gui.analysis.plots import _phase_about_model
     f = np.linspace(0.0, 200.0, 401)
     model = np.exp(-1j * 2 * np.pi * f * 0.008) / (1 + 1j * f / 30.0)      # delay + lag
     rng = np.random.default_rng(4)

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from groundstation.gui.chart_autoscale import EDGE, nice_range, nice_step, sticky_range
+from groundstation.gui.charts.autoscale import EDGE, nice_range, nice_step, sticky_range
 
 from conftest import HighRateFeeder
 

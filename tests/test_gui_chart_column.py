@@ -12,7 +12,7 @@ from PySide6.QtCore import QEvent, QMimeData, QObject, QPoint, QPointF, Qt
 from PySide6.QtGui import QDragEnterEvent, QDropEvent, QMouseEvent
 from PySide6.QtWidgets import QApplication, QGraphicsView
 
-from groundstation.gui.chart_column import HANDLE_PX
+from groundstation.gui.charts.column import HANDLE_PX
 
 from conftest import HighRateFeeder
 

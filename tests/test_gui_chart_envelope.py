@@ -12,7 +12,7 @@ import pytest
 
 from groundstation.live.display_buffers import (PYRAMID_BLOCKS, TelemetryStore, aligned_envelope,
                                                 bin_factor)
-from groundstation.gui.charts import StripChartPanel
+from groundstation.gui.charts.panel import StripChartPanel
 
 from conftest import HighRateFeeder
 

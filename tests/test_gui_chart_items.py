@@ -10,7 +10,7 @@ import pytest
 from PySide6.QtCore import QRectF
 from PySide6.QtWidgets import QGraphicsItem
 
-from groundstation.gui.chart_items import LeanLegend, LeanPlotItem
+from groundstation.gui.charts.items import LeanLegend, LeanPlotItem
 
 
 @pytest.fixture

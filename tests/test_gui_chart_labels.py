@@ -11,8 +11,8 @@ from PySide6.QtGui import QColor
 from PySide6.QtWidgets import (QAbstractScrollArea, QApplication, QTableWidgetItem,
                                QVBoxLayout, QWidget)
 
-from groundstation.gui.chart_labels import SteadyLabel
-from groundstation.gui.panels import _LimitTable
+from groundstation.gui.common.steady_label import SteadyLabel
+from groundstation.gui.panels.session_panels import _LimitTable
 
 
 class _LayoutRequests(QObject):

@@ -9,7 +9,7 @@ import pytest
 from PySide6.QtWidgets import QApplication, QWidget
 
 from groundstation.live.display_buffers import TelemetryStore
-from groundstation.gui.spectrum import SpectrumView
+from groundstation.gui.charts.spectrum import SpectrumView
 
 
 @pytest.fixture

@@ -12,9 +12,9 @@ from PySide6.QtCore import QMimeData, QPointF, Qt
 from PySide6.QtGui import QDropEvent
 
 from groundstation.codec import StreamDeframer
-from groundstation.gui.channel_tree import ChannelTree, display_unit, format_value
-from groundstation.gui.charts import StripChartPanel
-from groundstation.gui.spectrum import SpectrumView, welch_psd
+from groundstation.gui.charts.channel_tree import ChannelTree, display_unit, format_value
+from groundstation.gui.charts.panel import StripChartPanel
+from groundstation.gui.charts.spectrum import SpectrumView, welch_psd
 from groundstation.sim import SimulatedDevice
 from groundstation.live.display_buffers import TelemetryStore
 

@@ -21,8 +21,8 @@ from PySide6.QtWidgets import QMenu
 
 from groundstation.basemotion import BaseStageModel
 from groundstation.cli.main import main
-from groundstation.gui.fg_motion_check import newest_device_time
-from groundstation.gui.fg_panel import FIELD_BAD
+from groundstation.gui.generator.motion_check import newest_device_time
+from groundstation.gui.generator.panel import FIELD_BAD
 from groundstation.logs import LogReader
 from groundstation.plant.testbed import load_testbed
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from groundstation.gui.session import Session
-from groundstation.gui.session_events import PLAY_STATUSES, PlayOutcome
+from groundstation.gui.session.session import Session
+from groundstation.gui.session.events import PLAY_STATUSES, PlayOutcome
 from groundstation.params import table as ptable
 from groundstation.params.upload import ActiveTable, UploadRecord
 from groundstation.profiles import PlaybackResult, load_profile

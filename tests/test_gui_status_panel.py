@@ -5,8 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from groundstation.gui.panels import StatusPanel
-from groundstation.gui.session import Session
+from groundstation.gui.panels.session_panels import StatusPanel
+from groundstation.gui.session.session import Session
 
 from conftest import HighRateFeeder
 

@@ -9,7 +9,7 @@ import pytest
 from PySide6.QtCore import QSettings, Qt
 
 from groundstation.gui.main_window import MainWindow
-from groundstation.gui.session import Session
+from groundstation.gui.session.session import Session
 from groundstation.logs import LogReader
 
 

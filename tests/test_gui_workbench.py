@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 from PySide6.QtCore import Qt
 
-from groundstation.gui.design_workbench import DesignWorkbench
-from groundstation.gui.design_workbench_model import WorkbenchModel
-from groundstation.gui.design_workbench_plots import db
+from groundstation.gui.workbench.workbench import DesignWorkbench
+from groundstation.gui.workbench.model import WorkbenchModel
+from groundstation.gui.workbench.plots import db
 from groundstation.params.design import load_design
 from groundstation.params.design_writer import transfer_function_mismatch
 from groundstation.params.loop import validate

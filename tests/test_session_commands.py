@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import threading
 
-from groundstation.gui.session_commands import CommandQueue
+from groundstation.gui.session.commands import CommandQueue
 
 
 def start_thread(threads):

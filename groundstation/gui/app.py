@@ -24,7 +24,7 @@ def run_gui(dictionary: Dictionary, *, connect: str | None = "sim", testbed: str
     from PySide6.QtWidgets import QApplication
 
     from .main_window import MainWindow
-    from .session import Session
+    from .session.session import Session
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     app.setApplicationName("groundstation")

@@ -31,11 +31,11 @@ from ..params import table as ptable
 from ..params.upload import UploadRecord
 from ..profiles.profile import WAVEFORMS_DIR
 from ..plant.testbed import DEFAULT_TESTBED, PROFILES_DIR
-from .charts import StripChartPanel
-from .params_panel import ParameterPanel
-from .profile_panel import ProfilePanel
-from .session import Session
-from .session_events import PlayOutcome
+from .charts.panel import StripChartPanel
+from .panels.params import ParameterPanel
+from .panels.profile import ProfilePanel
+from .session.session import Session
+from .session.events import PlayOutcome
 
 DEMO_TITLE = "Demo: step response on the simulator"
 CONTROLLERS_DIR = PROFILES_DIR / "controllers"

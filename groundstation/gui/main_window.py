@@ -11,18 +11,18 @@ from PySide6.QtWidgets import (QDockWidget, QFileDialog, QLabel, QMainWindow, QM
                                QPushButton, QToolBar)
 
 from ..plant.testbed import TESTBEDS_DIR
-from .analysis_panel import AnalysisPanel
-from .campaign_panel import CampaignPanel
-from .channel_tree import ChannelTree
-from .charts import StripChartPanel
+from .analysis.panel import AnalysisPanel
+from .panels.campaign import CampaignPanel
+from .charts.channel_tree import ChannelTree
+from .charts.panel import StripChartPanel
 from .demo import DEMO_TITLE, DemoController, plan_for
-from .fg_panel import GeneratorPanel
-from .params_panel import ParameterPanel
-from .profile_panel import ProfilePanel
-from .log_panels import EventLog, ReplayBar
-from .panels import CommandPanel, ConnectionBar, RecordingPanel, StatusPanel
-from .session import Session
-from .spectrum import SpectrumView
+from .generator.panel import GeneratorPanel
+from .panels.params import ParameterPanel
+from .panels.profile import ProfilePanel
+from .panels.logs import EventLog, ReplayBar
+from .panels.session_panels import CommandPanel, ConnectionBar, RecordingPanel, StatusPanel
+from .session.session import Session
+from .charts.spectrum import SpectrumView
 
 DEFAULT_LAYOUT = [["HIGH_RATE.encoder_outer", "HIGH_RATE.encoder_inner"],
                   ["HIGH_RATE.los_estimate", "HIGH_RATE.reference"],

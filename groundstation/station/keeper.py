@@ -1,6 +1,6 @@
 """A link kept open for a command-line session: connect, and reconnect with back-off.
 
-The window reconnects on its own after a lost link (gui/session.py, with the same
+The window reconnects on its own after a lost link (gui/session/session.py, with the same
 delays); `record` and `monitor` use this.  For `--device sim` the keeper also owns the
 simulator child, and starts a fresh one if the old one died.  A session *taken over*
 by another station is not reconnected: that is a decision for the operator.

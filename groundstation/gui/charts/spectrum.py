@@ -1,0 +1,207 @@
+"""Live power spectral density of one channel (log-log), from the telemetry store.
+
+On its own timer (a few Hz, only while visible) the view takes the last N seconds of
+the chosen channel and computes a Welch PSD (Hann window, 50 % overlap, density
+scaling, one-sided).  Sequence gaps and NaN split the record: each contiguous stretch
+long enough for one segment is averaged in, weighted by its length, so lost frames
+never get spliced into a fake step.  The text line gives the total RMS (the square
+root of the PSD integrated over the shown band) — the cumulative-RMS curve's end
+value — and the frequency of the largest peak.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pyqtgraph as pg
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
+from scipy import signal
+
+from ...core.dictionary import Dictionary
+from ...live.display_buffers import TelemetryStore
+from .channel_tree import channel_catalog, display_unit, format_value
+from ..common.steady_label import SteadyLabel
+
+SECONDS_CHOICES = (1, 2, 5, 10, 30, 60)
+REFRESH_HZ = 4.0
+MIN_SEGMENT = 64
+
+
+def contiguous_runs(t: np.ndarray, y: np.ndarray, gap_times: np.ndarray,
+                    period: float) -> list[tuple[int, int]]:
+    """(start, stop) of stretches without NaN, sequence gap or time jump."""
+    n = len(y)
+    valid = np.isfinite(y)
+    new_run = np.zeros(n, dtype=bool)
+    if n:
+        new_run[0] = True
+        new_run[1:] = np.diff(t) > 1.5 * period
+    if len(gap_times):
+        idx = np.searchsorted(t, gap_times, side="left")
+        new_run[idx[idx < n]] = True
+    run_id = np.cumsum(new_run | ~valid)          # a NaN also ends a run
+    vi = np.flatnonzero(valid)
+    if not len(vi):
+        return []
+    change = np.flatnonzero(np.diff(run_id[vi])) + 1
+    starts = vi[np.r_[0, change]]
+    stops = vi[np.r_[change - 1, len(vi) - 1]] + 1
+    return list(zip(starts.tolist(), stops.tolist()))
+
+
+def welch_psd(t: np.ndarray, y: np.ndarray, gap_times: np.ndarray | None = None,
+              max_segment: int = 8192) -> tuple[np.ndarray, np.ndarray, float]:
+    """(frequencies, one-sided PSD, sample rate) over the gap-free stretches of y.
+
+    The segment length is the largest power of two giving about four segments in the
+    longest stretch (≤ max_segment, ≥ 64); shorter stretches are left out."""
+    if len(t) < MIN_SEGMENT:
+        return np.empty(0), np.empty(0), math.nan
+    period = float(np.median(np.diff(t)))
+    if not period > 0:
+        return np.empty(0), np.empty(0), math.nan
+    fs = 1.0 / period
+    runs = contiguous_runs(t, y, np.asarray(gap_times if gap_times is not None else []), period)
+    longest = max((b - a for a, b in runs), default=0)
+    if longest < MIN_SEGMENT:
+        return np.empty(0), np.empty(0), fs
+    nperseg = int(min(max_segment, max(MIN_SEGMENT, 2 ** int(math.log2(max(longest // 4, 1))))))
+    total, weight, freqs = None, 0, None
+    for a, b in runs:
+        if b - a < nperseg:
+            continue
+        freqs, pxx = signal.welch(y[a:b], fs=fs, nperseg=nperseg)
+        total = pxx * (b - a) if total is None else total + pxx * (b - a)
+        weight += b - a
+    return freqs, total / weight, fs
+
+
+def cumulative_rms(freqs: np.ndarray, psd: np.ndarray) -> np.ndarray:
+    """sqrt of the PSD integrated from the lowest frequency up to each frequency."""
+    if len(freqs) < 2:
+        return np.zeros_like(psd)
+    df = np.diff(freqs, prepend=freqs[0] - (freqs[1] - freqs[0]))
+    return np.sqrt(np.cumsum(psd * df))
+
+
+class SpectrumView(QWidget):
+    """PSD of one channel over the last N seconds, log-log, with total RMS."""
+
+    def __init__(self, store: TelemetryStore, dictionary: Dictionary,
+                 parent: QWidget | None = None):
+        super().__init__(parent)
+        self.store = store
+        self.catalog = channel_catalog(dictionary)
+        self.freqs = np.empty(0)
+        self.psd = np.empty(0)
+        self.total_rms = math.nan
+        self.channel_combo = QComboBox(self)
+        for cid, info in self.catalog.items():
+            if info.units and info.item is not None and not info.item.states:
+                self.channel_combo.addItem(cid, cid)
+        self.seconds_combo = QComboBox(self)
+        for s in SECONDS_CHOICES:
+            self.seconds_combo.addItem(f"{s} s", float(s))
+        self.seconds_combo.setCurrentIndex(SECONDS_CHOICES.index(10))
+        self.seconds_combo.setToolTip("Length of data the PSD is computed over")
+        self.rms_label = SteadyLabel("", self)     # new figures on every refresh: no relayout
+        self.rms_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        self.plot = pg.PlotWidget(self)
+        pi = self.plot.getPlotItem()
+        pi.setLogMode(x=True, y=True)
+        pi.showGrid(x=True, y=True, alpha=0.25)
+        pi.setLabel("bottom", "frequency", units="Hz", siPrefixEnableRanges=())
+        self.curve = pi.plot(pen=pg.mkPen("#4e9bff", width=1))
+        bar = QHBoxLayout()
+        bar.setContentsMargins(2, 2, 2, 2)
+        bar.addWidget(QLabel("Channel", self))
+        bar.addWidget(self.channel_combo, 1)
+        bar.addWidget(QLabel("over", self))
+        bar.addWidget(self.seconds_combo)
+        bar.addWidget(self.rms_label, 1)
+        layout = QVBoxLayout(self)
+        layout.setContentsMargins(0, 0, 0, 0)
+        layout.addLayout(bar)
+        layout.addWidget(self.plot, 1)
+        self.channel_combo.currentIndexChanged.connect(lambda _i: self._on_channel())
+        self.seconds_combo.currentIndexChanged.connect(lambda _i: self.refresh())
+        self._on_channel()
+        self._timer = QTimer(self)
+        self._timer.setInterval(int(1000 / REFRESH_HZ))
+        self._timer.timeout.connect(self._on_timer)
+        self._timer.start()
+
+    @property
+    def channel(self) -> str:
+        return self.channel_combo.currentData() or ""
+
+    def set_channel(self, channel_id: str) -> None:
+        packet, _, name = channel_id.partition(".")
+        ring = self.store.rings.get(packet)
+        if ring is None or name not in ring.channels:
+            raise ValueError(f"unknown channel {channel_id!r}: use 'PACKET.channel'")
+        i = self.channel_combo.findData(channel_id)
+        if i < 0:
+            self.channel_combo.addItem(channel_id, channel_id)
+            i = self.channel_combo.count() - 1
+        self.channel_combo.setCurrentIndex(i)
+
+    @property
+    def seconds(self) -> float:
+        return float(self.seconds_combo.currentData())
+
+    def set_seconds(self, seconds: float) -> None:
+        i = self.seconds_combo.findData(float(seconds))
+        if i < 0:
+            raise ValueError(f"spectrum length {seconds!r} s not one of {SECONDS_CHOICES}")
+        self.seconds_combo.setCurrentIndex(i)
+
+    def _on_channel(self) -> None:
+        info = self.catalog.get(self.channel)
+        unit = display_unit(info.units if info else "")
+        u = unit.units or "units"
+        # log axis: decades on the ticks, no SI prefix
+        self.plot.getPlotItem().setLabel("left", f"PSD ({u}²/Hz)", siPrefixEnableRanges=())
+        self.refresh()
+
+    def _on_timer(self) -> None:
+        # Shown and on screen.  A dock tabbed behind another one is still "visible" to
+        # Qt, only placed outside the window (nothing of it can be seen): the PSD was
+        # computed four times a second for nobody (6 % of the GUI thread in bench_gui).
+        if self.isVisible() and not self.visibleRegion().isEmpty():
+            self.refresh()
+
+    def refresh(self) -> None:
+        cid = self.channel
+        packet, _, name = cid.partition(".")
+        ring = self.store.rings.get(packet)
+        info = self.catalog.get(cid)
+        unit = display_unit(info.units if info else "")
+        if ring is None or name not in ring.channels:
+            self._show(np.empty(0), np.empty(0), unit)
+            return
+        snap = ring.snapshot([name], seconds=self.seconds)
+        y = snap.values[name] * unit.scale
+        freqs, psd, _fs = welch_psd(snap.device_time, y, snap.gap_device_times)
+        self._show(freqs, psd, unit)
+
+    def _show(self, freqs: np.ndarray, psd: np.ndarray, unit) -> None:
+        keep = (freqs > 0) & (psd > 0) if len(freqs) else np.zeros(0, dtype=bool)
+        self.freqs, self.psd = freqs[keep], psd[keep]
+        if not len(self.freqs):
+            self.curve.setData(np.empty(0), np.empty(0))   # not lists: see charts._EMPTY
+            self.total_rms = 0.0 if len(freqs) else math.nan
+            self.rms_label.setText("<i>constant signal: no spectrum</i>" if len(freqs) else
+                                   f"<i>fewer than {MIN_SEGMENT} gap-free samples</i>")
+            return
+        self.curve.setData(self.freqs, self.psd, skipFiniteCheck=True)
+        self.total_rms = float(cumulative_rms(self.freqs, self.psd)[-1])
+        peak = self.freqs[int(np.argmax(self.psd))]
+        self.rms_label.setText(
+            f"RMS {format_value(self.total_rms, unit)} "
+            f"({self.freqs[0]:.3g}–{self.freqs[-1]:.4g} Hz) · peak {peak:.4g} Hz")
+
+    def peak_frequency(self) -> float:
+        return float(self.freqs[int(np.argmax(self.psd))]) if len(self.psd) else math.nan

@@ -1,0 +1,2 @@
+"""The panels around the charts: connection bar, status, commands, recording, parameters,
+profiles, campaigns and logs."""
