@@ -66,7 +66,7 @@ from gui_report import before_after, print_table
 
 from groundstation.core.dictionary import load_dictionary
 from groundstation.gui.main_window import MainWindow
-from groundstation.gui.session import Session
+from groundstation.gui.session.session import Session
 from groundstation.logs.live import attach_recorder
 from groundstation.sim.process import SimulatorProcess
 from groundstation.plant.testbed import TESTBEDS_DIR

@@ -28,7 +28,7 @@ from groundstation.core.dictionary import load_dictionary
 from groundstation.link import open_client
 from groundstation.params import table as ptable
 from groundstation.params.clearance import clear_design
-from groundstation.params.design import load_design, table_values
+from groundstation.params.design_file import load_design, table_values
 from groundstation.params.loop import validate
 from groundstation.params.upload import ParameterLoader
 from groundstation.sim import SimulatedDevice

@@ -45,7 +45,7 @@ import numpy as np
 from common import machine, save
 
 from groundstation.core.dictionary import load_dictionary
-from groundstation.params.design import load_design
+from groundstation.params.design_file import load_design
 from groundstation.params.loop_response import loop_model, margins
 from groundstation.params.pq_design import analyze, dc_input_sensitivity, frequency_grid
 from groundstation.params.pq_response import linear_responses

@@ -62,7 +62,7 @@ def _gains(g0: float, n: int) -> list[float]:
 
 
 def measure(app, pair, processes: bool, edits: int, screenshot: Path | None) -> dict:
-    from groundstation.gui.design_workbench import DesignWorkbench
+    from groundstation.gui.workbench.workbench import DesignWorkbench
 
     wb = DesignWorkbench(processes=processes)
     wb.show()
@@ -111,7 +111,7 @@ def measure(app, pair, processes: bool, edits: int, screenshot: Path | None) -> 
 
 
 def all_synchronous(pair, edits: int) -> list[float]:
-    from groundstation.gui.design_workbench_model import WorkbenchModel, fast_views, slow_views
+    from groundstation.gui.workbench.model import WorkbenchModel, fast_views, slow_views
 
     m = WorkbenchModel()
     m.open(0, CONTROLLERS / f"{pair[0]}.toml")

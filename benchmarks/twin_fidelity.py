@@ -39,7 +39,7 @@ from groundstation.basemotion.psd import load_psd  # noqa: E402
 from groundstation.basemotion.stage import BaseStageModel  # noqa: E402
 from groundstation.basemotion.synthesis import make_profile  # noqa: E402
 from groundstation.core.dictionary import load_dictionary  # noqa: E402
-from groundstation.params.design import load_design, table_values  # noqa: E402
+from groundstation.params.design_file import load_design, table_values  # noqa: E402
 from groundstation.params.table import default_values  # noqa: E402
 from groundstation.plant.testbed import load_testbed  # noqa: E402
 from groundstation.sim import core  # noqa: E402

@@ -21,7 +21,8 @@ from groundstation.cli.main import main
 from groundstation.instruments import open_generator
 from groundstation.link import open_client
 from groundstation.sim import SimulatedDevice
-from groundstation.sim.scpi_fg import ScpiServer, SimulatedGenerator, attach_generator
+from groundstation.sim.scpi_server import ScpiServer, attach_generator
+from groundstation.sim.fg_instrument import SimulatedGenerator
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation.params.design import load_design
+from groundstation.params.design_file import load_design
 from groundstation.params.design_writer import (Factored, controller_problems, design_text,
                                                 factor_text, factored,
                                                 transfer_function_mismatch, write_design)

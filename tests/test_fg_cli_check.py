@@ -21,7 +21,7 @@ from groundstation.link import open_client
 from groundstation.logs import Recorder
 from groundstation.logs.live import attach_recorder
 from groundstation.sim import SimulatedDevice
-from groundstation.sim.scpi_fg import attach_generator
+from groundstation.sim.scpi_server import attach_generator
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent

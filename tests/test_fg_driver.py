@@ -21,7 +21,8 @@ from groundstation.instruments import (InstrumentError, InstrumentLimitError, In
                                        SafetyLimitError, list_resources,
                                        open_generator)
 from groundstation.instruments import spec4050 as spec
-from groundstation.sim.scpi_fg import ScpiServer, SimulatedGenerator
+from groundstation.sim.scpi_server import ScpiServer
+from groundstation.sim.fg_instrument import SimulatedGenerator
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -24,7 +24,8 @@ from groundstation.cli.main import main
 from groundstation.core.errors import GroundStationError
 from groundstation.instruments import (InstrumentError, InstrumentLimitError,
                                        InstrumentLinkError, SafetyLimitError, open_generator)
-from groundstation.sim.scpi_fg import ScpiServer, SimulatedGenerator
+from groundstation.sim.scpi_server import ScpiServer
+from groundstation.sim.fg_instrument import SimulatedGenerator
 from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
 
 ROOT = Path(__file__).resolve().parent.parent

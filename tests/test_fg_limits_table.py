@@ -17,7 +17,8 @@ import pytest
 
 from groundstation.instruments import InstrumentLimitError, open_generator
 from groundstation.instruments import spec4050 as spec
-from groundstation.sim.scpi_fg import ScpiServer, SimulatedGenerator
+from groundstation.sim.scpi_server import ScpiServer
+from groundstation.sim.fg_instrument import SimulatedGenerator
 
 CH = 1
 #: a basic wave inside every row at either load: the state each case starts from
@@ -176,7 +177,7 @@ def test_the_simulated_instrument_takes_inside_and_refuses_outside(index, load, 
 # ------------------------------------------------------------------ the GUI
 @pytest.mark.parametrize("load", spec.LOADS)
 def test_the_gui_limit_texts_show_the_tables_numbers(load):
-    from groundstation.gui.generator.controller import limit_texts
+    from groundstation.gui.generator.limits_text import limit_texts
 
     for row in spec.LIMITS:
         low, high = row.bounds(load)
@@ -196,7 +197,7 @@ def test_the_gui_limit_texts_show_the_tables_numbers(load):
 
 def test_the_panel_shows_the_texts_next_to_its_fields(qtbot, dictionary, tmp_path):
     from groundstation.gui.generator.panel import GeneratorPanel
-    from groundstation.gui.generator.controller import limit_texts
+    from groundstation.gui.generator.limits_text import limit_texts
     from groundstation.gui.session.session import Session
 
     session = Session(dictionary, store_seconds=10.0, param_history=tmp_path / "params")

@@ -17,7 +17,7 @@ from groundstation import Testbed
 from groundstation.analysis import analyze_log
 from groundstation.analysis.log_identification import frf_from_log
 from groundstation.core.errors import GroundStationError
-from groundstation.gui.analysis.panel import METRIC_COLUMNS, VALUE_ROLE
+from groundstation.gui.analysis.tables import METRIC_COLUMNS, VALUE_ROLE
 from groundstation.logs import LogReader
 
 ROOT = Path(__file__).resolve().parent.parent

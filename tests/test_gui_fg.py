@@ -22,7 +22,7 @@ from PySide6.QtWidgets import QMenu
 from groundstation.basemotion import BaseStageModel
 from groundstation.cli.main import main
 from groundstation.gui.generator.motion_check import newest_device_time
-from groundstation.gui.generator.panel import FIELD_BAD
+from groundstation.gui.generator.channel_editor import FIELD_BAD
 from groundstation.logs import LogReader
 from groundstation.plant.testbed import load_testbed
 

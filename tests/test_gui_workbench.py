@@ -14,7 +14,7 @@ from PySide6.QtCore import Qt
 from groundstation.gui.workbench.workbench import DesignWorkbench
 from groundstation.gui.workbench.model import WorkbenchModel
 from groundstation.gui.workbench.plots import db
-from groundstation.params.design import load_design
+from groundstation.params.design_file import load_design
 from groundstation.params.design_writer import transfer_function_mismatch
 from groundstation.params.loop import validate
 from groundstation.params.pq_design import analyze, dc_input_sensitivity, frequency_grid

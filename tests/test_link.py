@@ -380,7 +380,7 @@ def test_lost_tcp_link_fails_pending_and_keeps_what_was_received(dictionary):
 def test_ports_in_use_are_reported(dictionary, device):
     with pytest.raises(PortInUseError, match=f"{device.tcp_port}.*--tcp-port"):
         SimulatedDevice(dictionary, tcp_port=device.tcp_port, pacing="manual").start()
-    from groundstation.sim.scpi_fg import attach_generator
+    from groundstation.sim.scpi_server import attach_generator
     with pytest.raises(PortInUseError, match=f"{device.tcp_port}.*--fg-port"):
         attach_generator(device, port=device.tcp_port)
     taken = UdpReceiver("127.0.0.1", 0)

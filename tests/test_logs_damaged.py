@@ -25,9 +25,9 @@ from groundstation.core.errors import GroundStationError
 from groundstation.logs import LogFile, LogReader, ReplayError, iter_blocks
 from groundstation.logs.check import check_log
 from groundstation.logs.export import ExportError, export_csv, export_mat
-from groundstation.logs.reader import LogDamagedError, LogFormatError
+from groundstation.logs.opening import LogDamagedError, LogFormatError
 from groundstation.logs.redecode import redecode
-from groundstation.logs.replay import ReplayDamagedError
+from groundstation.logs.blocks import ReplayDamagedError
 
 from test_logs_reader import HOST0, _simulate
 

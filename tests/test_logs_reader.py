@@ -20,8 +20,10 @@ from groundstation.codec import StreamDeframer, TelemetryBlock
 from groundstation.core.errors import GroundStationError
 from groundstation.logs import LogFile, Recorder
 from groundstation.logs.export import export_csv, export_mat, matlab_name
-from groundstation.logs.reader import (EmptyRangeError, LogError, LogFormatError, LogQueryError,
-                                       LogReader, _search)
+from groundstation.logs.reader import LogReader
+from groundstation.logs.opening import LogFormatError, LogQueryError
+from groundstation.logs.rows import search_sorted as _search
+from groundstation.logs.opening import EmptyRangeError, LogError
 from groundstation.sim import SimulatedDevice
 
 REPO = Path(__file__).resolve().parent.parent

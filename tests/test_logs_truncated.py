@@ -30,7 +30,7 @@ import groundstation
 from groundstation.logs import LogFile, LogReader
 from groundstation.logs import opening
 from groundstation.logs.check import check_log
-from groundstation.logs.reader import LogDamagedError
+from groundstation.logs.opening import LogDamagedError
 
 from test_logs_reader import HOST0, _simulate
 

@@ -8,7 +8,7 @@ import pytest
 
 from groundstation.cli.main import main
 from groundstation.params import table as ptable
-from groundstation.params.design import load_design, table_values
+from groundstation.params.design_file import load_design, table_values
 from groundstation.params.upload import ParameterHistory
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import Firmware

@@ -13,7 +13,7 @@ import pytest
 
 from groundstation.link import open_client
 from groundstation.params import table as ptable
-from groundstation.params.design import load_design, table_values
+from groundstation.params.design_file import load_design, table_values
 from groundstation.params.loop import validate
 from groundstation.params.clearance import override_table
 from groundstation.params.upload import ParameterLoader

@@ -1,5 +1,5 @@
 """Controller design files -> discrete sections -> a parameter table, and the loop checks
-made before a table is sent (groundstation.params.design, groundstation.params.loop)."""
+made before a table is sent (groundstation.params.design_file, discretise, loop)."""
 
 from __future__ import annotations
 
@@ -13,12 +13,14 @@ import pytest
 
 from groundstation.cli.main import main
 from groundstation.params import table as ptable
-from groundstation.params.design import (CONTROL_RATE_HZ, DesignError, TransferFunction,
-                                         bilinear_rate_hz, cascade_match, discretisation_match,
-                                         discretise, discretise_design, load_design,
-                                         section_responses, sos_response,
-                                         table_values)
-from groundstation.params.loop import bode, loop_model, validate
+from groundstation.params.tf_algebra import CONTROL_RATE_HZ, DesignError, TransferFunction
+from groundstation.params.discretise import (bilinear_rate_hz, cascade_match, discretisation_match,
+                                             discretise, discretise_design, section_responses,
+                                             sos_response)
+from groundstation.params.design_file import load_design, table_values
+from groundstation.params.loop import validate
+from groundstation.params.loop_response import loop_model
+from groundstation.params.loop_response import bode
 from groundstation.plant.model import plant_transfer_functions
 
 ROOT = Path(__file__).resolve().parent.parent

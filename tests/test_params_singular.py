@@ -11,8 +11,9 @@ import numpy as np
 import pytest
 
 from groundstation.cli.main import main
-from groundstation.params.design import (DesignError, TransferFunction, bilinear_singular_point,
-                                         discretise, load_design)
+from groundstation.params.tf_algebra import DesignError, TransferFunction
+from groundstation.params.discretise import bilinear_singular_point, discretise
+from groundstation.params.design_file import load_design
 from groundstation.params.upload import ParameterHistory
 from groundstation.sim import SimulatedDevice
 from groundstation.sim.firmware import Firmware

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 from scipy.linalg import subspace_angles
 
-from groundstation.params.design import TransferFunction, load_design
+from groundstation.params.tf_algebra import TransferFunction
+from groundstation.params.design_file import load_design
 from groundstation.params.pq import (alignment_deg, cos_alignment, input_sensitivity_matrix,
                                      loop_functions,
                                      magnitude_band_db, magnitude_contour_deg, phase_band_deg,

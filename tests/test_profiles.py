@@ -14,9 +14,11 @@ import pytest
 
 from groundstation.cli.main import main
 from groundstation.profiles import waveforms as g
-from groundstation.profiles.profile import (WAVEFORMS_DIR, Profile, ProfileFileError, ProfileRefused,
-                                            check_profile, load_profile, preview, profile_from_dict,
-                                            summarise)
+from groundstation.profiles.profile import WAVEFORMS_DIR, load_profile, profile_from_dict
+from groundstation.profiles.samples import Profile, ProfileFileError
+from groundstation.profiles.checks import check_profile
+from groundstation.profiles.samples import ProfileRefused
+from groundstation.profiles.summary import preview, summarise
 from groundstation.profiles.upload import ProfilePlayer, ProfileUploadError, profile_id_for
 from groundstation.sim import SimulatedDevice
 

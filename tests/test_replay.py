@@ -15,7 +15,8 @@ from groundstation.codec import StreamDeframer
 from groundstation.core.errors import GroundStationError
 from groundstation.link.stats import LinkStatistics
 from groundstation.logs import LogFile, Recorder
-from groundstation.logs.replay import ReplayError, ReplaySource, iter_blocks
+from groundstation.logs.replay import ReplaySource
+from groundstation.logs.blocks import ReplayError, iter_blocks
 from groundstation.sim import SimulatedDevice
 
 from conftest import wait_for

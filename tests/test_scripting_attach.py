@@ -13,7 +13,7 @@ from groundstation.link import open_client
 from groundstation.logs import LogReader
 from groundstation import ScriptError, Testbed
 from groundstation.sim import SimulatedDevice
-from groundstation.sim.scpi_fg import attach_generator
+from groundstation.sim.scpi_server import attach_generator
 from groundstation.plant.testbed import load_testbed
 
 from conftest import wait_for

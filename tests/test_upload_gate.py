@@ -14,7 +14,7 @@ from groundstation.logs import LogReader
 from groundstation.params import table as ptable
 from groundstation.params.clearance import (Clearance, ValidationRefused, clear_design,
                                             override_table)
-from groundstation.params.design import load_design, table_values
+from groundstation.params.design_file import load_design, table_values
 from groundstation.params.upload import MemoryHistory, NotClearedError, ParameterLoader
 from groundstation import ScriptError, Testbed
 

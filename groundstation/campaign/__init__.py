@@ -53,7 +53,7 @@ The package, one job per module:
 - `report_figures`: the comparison's bar charts (matplotlib, PNG) and the
   self-contained HTML report.
 
-Everything is importable from `groundstation.campaign` as before the split.
+`groundstation.campaign` names the package's public API (below).
 """
 
 from __future__ import annotations

@@ -153,7 +153,7 @@ class UploadDesign(Action):
     paths = {"design"}
 
     def check(self, c: StepCheck) -> None:
-        from ..params.design import load_design     # imported when a step is checked, not at start-up
+        from ..params.design_file import load_design     # imported when a step is checked, not at start-up
 
         c.loads("design", "design", lambda: load_design(c.args["design"]))
         c.text("accept_risk")

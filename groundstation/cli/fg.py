@@ -348,7 +348,7 @@ def _cmd_upload(args) -> int:
 def _journal_motion(reader):
     """From the log's journal of the function generator (written by the GUI): the last
     upload's settings and the device times where its motion started and stopped."""
-    from ..logs.reader import LogQueryError
+    from ..logs.opening import LogQueryError
 
     try:
         records = reader.journal("function_generator")

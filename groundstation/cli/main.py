@@ -103,7 +103,7 @@ def _cmd_sim(args) -> int:
     fg = None
     if args.fg_port is not None:          # the base-stage function generator (SCPI on TCP)
         from ..sim.process import FG_ANNOUNCE
-        from ..sim.scpi_fg import attach_generator
+        from ..sim.scpi_server import attach_generator
 
         try:
             fg = attach_generator(dev, host=args.host, port=args.fg_port)

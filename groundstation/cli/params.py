@@ -52,7 +52,7 @@ def _add_validate(actions) -> None:
 
 def _cmd_validate(args) -> int:
     from ..core.dictionary import load_dictionary
-    from ..params.design import load_design, table_values
+    from ..params.design_file import load_design, table_values
     from ..params.loop import report_lines, validate
 
     try:
@@ -104,7 +104,7 @@ def load_dictionary_for(args):
 
 def _cmd_upload(args) -> int:
     from ..params.clearance import ValidationRefused
-    from ..params.design import load_design, table_values
+    from ..params.design_file import load_design, table_values
     from ..params.loop import report_lines, validate
 
     try:
@@ -143,7 +143,7 @@ def _cmd_upload(args) -> int:
 def _cmd_show(args) -> int:
     from ..params.compare import format_rows, three_way
     from ..params.upload import provenance
-    from ..params.design import load_design, table_values
+    from ..params.design_file import load_design, table_values
     from ..params import table as ptable
 
     design_values = None
@@ -240,7 +240,7 @@ def _add_analyze(actions) -> None:
 
 
 def _cmd_analyze(args) -> int:
-    from ..params.design import load_design
+    from ..params.design_file import load_design
     from ..params.pq_report import summarize, summary_lines
     from ..params.pq_response import DisturbanceError, parse_disturbance
 

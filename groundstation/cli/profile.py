@@ -65,7 +65,7 @@ def _add_play(actions) -> None:
 
 
 def _gyro_range(args) -> float:
-    from ..profiles.profile import DEFAULT_GYRO_RANGE
+    from ..profiles.samples import DEFAULT_GYRO_RANGE
     if not args.testbed:
         return DEFAULT_GYRO_RANGE
     from ..plant.testbed import load_testbed
@@ -75,7 +75,9 @@ def _gyro_range(args) -> float:
 def _load(args):
     """(profile, check) or an exit code for an unreadable file."""
     from ..core.dictionary import load_dictionary
-    from ..profiles.profile import ProfileFileError, check_profile, load_profile
+    from ..profiles.profile import load_profile
+    from ..profiles.samples import ProfileFileError
+    from ..profiles.checks import check_profile
 
     try:
         dictionary = load_dictionary(args.protocol_dir)
@@ -89,7 +91,8 @@ def _load(args):
 
 
 def _cmd_show(args) -> int:
-    from ..profiles.profile import sample_range, summarise, write_csv
+    from ..profiles.checks import sample_range
+    from ..profiles.summary import summarise, write_csv
 
     loaded = _load(args)
     if isinstance(loaded, int):

@@ -18,10 +18,13 @@ One job per module:
 pyvisa is imported only when a generator is opened or resources are listed.
 """
 
-from .fg4050 import (ArbSelection, ArbUpload, BasicWave, FunctionGenerator4050, Identity,
-                     InstrumentError, InstrumentLimitError, InstrumentLinkError, OutputState,
-                     ResourceListing, SafetyLimitError, SafetyLimits, SettingRefusedError,
-                     list_resources, normalise_backend, open_generator)
+from .fg4050 import FunctionGenerator4050, open_generator
+from .records4050 import ArbSelection, ArbUpload, BasicWave, OutputState
+from .spec4050 import Identity
+from .fg_errors import (InstrumentError, InstrumentLimitError, InstrumentLinkError,
+                        SafetyLimitError, SettingRefusedError)
+from .visa_link import ResourceListing, list_resources, normalise_backend
+from .safety import SafetyLimits
 
 __all__ = ["ArbSelection", "ArbUpload", "BasicWave", "FunctionGenerator4050", "Identity",
            "InstrumentError", "InstrumentLimitError", "InstrumentLinkError", "OutputState",

@@ -48,12 +48,11 @@ from . import spec4050 as spec
 # the records, errors and link are re-exported: callers import them from here or from
 # the package, as they did when this module held everything
 from .fg_errors import (InstrumentError, InstrumentLimitError, InstrumentLinkError,
-                        SafetyLimitError, SettingRefusedError)
+                        SettingRefusedError)
 from .records4050 import ArbSelection, ArbUpload, BasicWave, OutputState
 from .safety import SafetyLimits
 from .spec4050 import Identity
-from .visa_link import (ResourceListing, VisaLink, io_failure, list_resources,
-                        normalise_backend, resource_manager, shorten)
+from .visa_link import VisaLink, io_failure, normalise_backend, resource_manager, shorten
 
 log = logging.getLogger(__name__)
 
@@ -543,7 +542,4 @@ def open_generator(resource: str, *, backend: str | None = None, limits: SafetyL
         raise InstrumentLinkError(f"cannot open {resource} on {backend}: {why}") from None
 
 
-__all__ = ["ArbSelection", "ArbUpload", "BasicWave", "FunctionGenerator4050", "Identity",
-           "InstrumentError", "InstrumentLimitError", "InstrumentLinkError", "OutputState",
-           "ResourceListing", "SafetyLimitError", "SafetyLimits", "SettingRefusedError",
-           "list_resources", "normalise_backend", "open_generator"]
+__all__ = ["FunctionGenerator4050", "open_generator"]

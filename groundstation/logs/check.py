@@ -20,8 +20,8 @@ import h5py
 import numpy as np
 
 from .opening import superblock_eof, truncated_advice
-from .reader import (H5_READ_ERRORS, LogDamagedError, LogFormatError, LogReader,
-                     truncation_text)
+from .reader import LogReader
+from .opening import H5_READ_ERRORS, LogDamagedError, LogFormatError, truncation_text
 
 INTACT, DAMAGED, UNREADABLE = "intact", "damaged", "unreadable"
 EXIT_CODES = {INTACT: 0, DAMAGED: 1, UNREADABLE: 2}

@@ -27,8 +27,10 @@ from typing import Iterable
 import numpy as np
 
 from .atomic import atomic_output
-from .reader import (Channel, EmptyRangeError, LogDamagedError, LogError, LogQueryError, LogReader,
-                     truncation_text)
+from .reader import LogReader
+from .channels import Channel
+from .opening import LogDamagedError, LogQueryError, truncation_text
+from .opening import EmptyRangeError, LogError
 
 _FLOAT_FMT = "%.17g"
 MATLAB_NAME_MAX = 63
@@ -260,5 +262,5 @@ def _write_mat(reader: LogReader, path: Path, packet: str, chans: list[Channel],
     return len(data["device_time"])
 
 
-__all__ = ["ExportError", "ExportResult", "LogQueryError", "export", "export_csv", "export_mat",
-           "matlab_name", "readable_limit"]
+__all__ = ["ExportError", "ExportResult", "export", "export_csv", "export_mat", "matlab_name",
+           "readable_limit"]

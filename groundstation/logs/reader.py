@@ -13,9 +13,9 @@ Time ranges `[start, stop]` are inclusive and in seconds of the chosen timebase:
 (`host_time`, the host arrival time since the epoch, monotonic up to clock steps of the
 host).  Tick ranges `[tick_start, tick_stop)` are half-open, like Python slices.
 
-The parts live beside this module, one job each, and are importable from here as
-before: opening and damage detection (opening.py), the row search (rows.py), channel
-descriptions (channels.py) and the summary (summary.py).
+The parts live beside this module, one job each: opening and damage detection
+(opening.py), the row search (rows.py), channel descriptions (channels.py) and the
+summary (summary.py).
 """
 
 from __future__ import annotations
@@ -34,13 +34,12 @@ from ..core.dictionary import default_control_rate_hz
 from . import schema
 from .channels import HEADER_CHANNELS, Channel, packet_channels
 from .channels import to_engineering as _to_engineering
-# the names below were defined here before the split; callers still import them from here
-from .opening import (H5_READ_ERRORS, EmptyRangeError, LogDamagedError, LogError, LogFormatError,
-                      LogQueryError, check_layout, file_truncation, first_unreadable,
-                      open_log_file, truncated_advice, truncation_text, unreadable_text)
+from .opening import (H5_READ_ERRORS, LogDamagedError, LogFormatError, LogQueryError, check_layout,
+                      first_unreadable, open_log_file, truncated_advice, truncation_text,
+                      unreadable_text)
 from .opening import attr_text as _text
 from .rows import search_sorted as _search
-from .summary import LogInfo, PacketSummary, scan_sequence, summarize
+from .summary import LogInfo, scan_sequence, summarize
 
 TIMEBASES = ("device", "host")
 TIME_TOLERANCE_S = 1e-9
@@ -529,7 +528,4 @@ class LogReader:
         return _text(tb.attrs.get("name", "")), _text(tb.attrs.get("path", "")), text
 
 
-__all__ = ["Channel", "EmptyRangeError", "H5_READ_ERRORS", "HEADER_CHANNELS", "JournalRecord",
-           "LogDamagedError", "LogError", "LogFormatError", "LogInfo", "LogQueryError", "LogReader",
-           "PacketSummary", "TIMEBASES", "TIME_TOLERANCE_S", "file_truncation", "first_unreadable",
-           "open_log_file", "truncation_text"]
+__all__ = ["JournalRecord", "LogReader", "TIMEBASES", "TIME_TOLERANCE_S"]

@@ -21,7 +21,8 @@ from ..codec import DatagramDecoder, FrameCodec
 from ..core.dictionary import Dictionary
 from .atomic import atomic_output
 from .h5file import LogFile
-from .reader import LogError, LogReader
+from .reader import LogReader
+from .opening import LogError
 
 CHUNK_FRAMES = 100_000
 

@@ -37,7 +37,7 @@ from ..core.errors import GroundStationError
 from ..link.stats import LinkStatistics
 # ReplayError, ReplayDamagedError, iter_blocks and MAIN_PACKET were defined here before
 # the split; callers and tests still import them from this module
-from .blocks import MAIN_PACKET, BlockMerger, ReplayDamagedError, ReplayError, _Window, iter_blocks
+from .blocks import BlockMerger, _Window
 
 log = logging.getLogger(__name__)
 
@@ -415,5 +415,4 @@ class ReplaySource:
                 self._deliver(w, len(w), self._closing)
 
 
-__all__ = ["DELIVERY_PERIOD_S", "MAIN_PACKET", "MAX_SPEED", "MIN_SPEED", "ReplayDamagedError",
-           "ReplayError", "ReplaySource", "iter_blocks"]
+__all__ = ["DELIVERY_PERIOD_S", "MAX_SPEED", "MIN_SPEED", "ReplaySource"]

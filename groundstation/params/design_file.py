@@ -39,7 +39,7 @@ replaced whole, and giving Q or c1/c2 drops all three of the base's.
 
 The file is turned into continuous transfer functions here (groundstation.params.tf_algebra)
 and discretised by groundstation.params.discretise; table_values gives the parameter table.
-Part of the split of groundstation/params/design.py, which still re-exports every name.
+One of the three modules of the design path (tf_algebra, design_file, discretise).
 """
 
 from __future__ import annotations

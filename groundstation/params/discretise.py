@@ -6,7 +6,7 @@ roots at the map's singular point s = 2 fs' are refused.  Also how closely the d
 cascades follow the continuous ones.  All angular frequencies are rad/s, all frequencies
 named `_hz` are Hz.
 
-Part of the split of groundstation/params/design.py, which still re-exports every name.
+One of the three modules of the design path (tf_algebra, design_file, discretise).
 """
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ controller's poles, the saturation limits, closed-loop stability, the margins an
 the discretisation changes the closed loop.  `report_lines` is its report as text.
 
 Closed-loop stability is decided by the eigenvalues of the closed-loop state matrix,
-not by the margins.  Every name of loop_response.py is also importable from here.
+not by the margins.  The responses themselves (Bode, the sampled loop) are in loop_response.py.
 """
 
 from __future__ import annotations
@@ -21,16 +21,15 @@ import numpy as np
 
 from ..core.dictionary import Dictionary, load_dictionary
 from . import table as ptable
-from .design import (CONTROL_RATE_HZ, MATCH_BAND_HZ, ControllerDesign, DiscretisationMatch,
-                     discretisation_match, match_frequencies, response_error, table_values)
-from .loop_response import (IDENTITY_ROW, LOWEST_HZ, Bode, LoopModel, Margins, SampledLoop,
-                            bode, loop_model, margins, sampled_loop, sos_state_space)
+from .tf_algebra import CONTROL_RATE_HZ
+from .discretise import (MATCH_BAND_HZ, DiscretisationMatch, discretisation_match,
+                         match_frequencies, response_error)
+from .design_file import ControllerDesign, table_values
+from .loop_response import IDENTITY_ROW, LoopModel, Margins, loop_model, margins
 
-__all__ = ["IDENTITY_ROW", "INSIDE_TOLERANCE", "INTEGRATOR_TOLERANCE", "LOWEST_HZ",
-           "MATCH_LIMIT_DEG", "MATCH_LIMIT_PCT", "MIN_GAIN_MARGIN_DB", "MIN_PHASE_MARGIN_DEG",
-           "STABILITY_MARGIN", "Bode", "LoopModel", "Margins", "SampledLoop", "ValidationReport",
-           "bode", "loop_model", "margins", "report_lines", "sampled_loop", "sos_state_space",
-           "validate"]
+__all__ = ["INSIDE_TOLERANCE", "INTEGRATOR_TOLERANCE", "MATCH_LIMIT_DEG", "MATCH_LIMIT_PCT",
+           "MIN_GAIN_MARGIN_DB", "MIN_PHASE_MARGIN_DEG", "STABILITY_MARGIN", "ValidationReport",
+           "report_lines", "validate"]
 
 MATCH_LIMIT_PCT = 1.0             # closed-loop discretisation match tolerated without a warning
 MATCH_LIMIT_DEG = 1.0
@@ -172,7 +171,7 @@ def _continuous_pole_text(p: complex, rate_hz: float = CONTROL_RATE_HZ,
     """The design's own s for a discrete pole: the inverse of the (pre-warped) bilinear
     map the discretisation used, s = 2 fs' (z - 1)/(z + 1), so it reads as the factor in
     the design file."""
-    from .design import bilinear_rate_hz
+    from .discretise import bilinear_rate_hz
 
     z = complex(p)
     if abs(z + 1) < 1e-12:

@@ -34,7 +34,9 @@ import numpy as np
 
 from ..core.dictionary import Dictionary, load_dictionary
 from ..plant import model as plant_model
-from .design import CONTROL_RATE_HZ, ControllerDesign, sos_response, table_values
+from .tf_algebra import CONTROL_RATE_HZ
+from .design_file import ControllerDesign, table_values
+from .discretise import sos_response
 
 LOWEST_HZ = 1e-3                  # the frequency grid of the margins starts here
 IDENTITY_ROW = np.array([1.0, 0.0, 0.0, 1.0, 0.0, 0.0])

@@ -5,7 +5,7 @@ Zero-pole-gain transfer functions built from the reference's factors ([a] is (s 
 a partner design and the testbed's plant, and pole/zero cancellation.  All angular
 frequencies are rad/s, all frequencies named `_hz` are Hz.
 
-Part of the split of groundstation/params/design.py, which still re-exports every name.
+One of the three modules of the design path (tf_algebra, design_file, discretise).
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 The data-based friction models (DB-SFM, DB-DHM, reference §5) replace the analytic
 branch shape by a measured slope ratio f(x) over the normalised branch coordinate
 x in [0, 2].  The table is part of the testbed's description: the simulator integrates
-it (sim/friction.py), the controller design linearises it (params/design.py), and the
+it (sim/friction.py), the controller design linearises it (params/design_file.py, params/discretise.py), and the
 analysis compares measured hysteresis with it - so it lives here, not in the simulator.
 """
 

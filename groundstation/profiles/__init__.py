@@ -1,9 +1,12 @@
 """Command profiles: waveform generators (waveforms.py), profile files and their checks
 (profile.py), upload and playback on the device (upload.py).  See profiles/waveforms/."""
 
-from .profile import (TARGETS, Profile, ProfileCheck, ProfileError, ProfileFileError,
-                      ProfileRefused, ProfileSummary, check_profile, load_profile, preview,
-                      profile_from_dict, summarise, write_csv)
+from .profile import load_profile, profile_from_dict
+from .samples import TARGETS, Profile, ProfileFileError
+from .checks import check_profile
+from .checks import ProfileCheck
+from .samples import ProfileError, ProfileRefused
+from .summary import ProfileSummary, preview, summarise, write_csv
 from .upload import (PlaybackError, PlaybackResult, ProfileLoader, ProfilePlayer, ProfileRecord,
                      ProfileUploadError, default_mode)
 

@@ -25,8 +25,7 @@ reference).  Times end in _s, frequencies in _hz.
 The samples are float32 (what the device receives).  Errors name the file and the field.
 
 This module reads profile files; the Profile itself and its targets are in samples.py, the
-device's checks in checks.py, previews and summaries in summary.py.  Every name is also
-importable from here.
+device's checks in checks.py, previews and summaries in summary.py.
 """
 
 from __future__ import annotations
@@ -41,15 +40,11 @@ import numpy as np
 from ..core.dictionary import Dictionary
 from ..core.tomlfile import read_toml
 from . import waveforms as gen
-from .checks import ProfileCheck, check_profile, sample_range
-from .samples import (_CSV_UNITS, DEFAULT_GYRO_RANGE, RATE_HZ, TARGETS, Profile, ProfileError,
-                      ProfileFileError, ProfileRefused, TargetInfo)
-from .summary import ProfileSummary, preview, summarise, write_csv
+from .checks import check_profile
+from .samples import (_CSV_UNITS, DEFAULT_GYRO_RANGE, RATE_HZ, TARGETS, Profile, ProfileFileError,
+                      TargetInfo)
 
-__all__ = ["DEFAULT_GYRO_RANGE", "RATE_HZ", "TARGETS", "WAVEFORMS_DIR", "Profile", "ProfileCheck",
-           "ProfileError", "ProfileFileError", "ProfileRefused", "ProfileSummary", "TargetInfo",
-           "check_profile", "load_profile", "preview", "profile_from_dict", "sample_range",
-           "summarise", "write_csv"]
+__all__ = ["WAVEFORMS_DIR", "load_profile", "profile_from_dict"]
 
 WAVEFORMS_DIR = Path(__file__).resolve().parent.parent.parent / "profiles" / "waveforms"
 

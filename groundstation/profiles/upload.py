@@ -34,7 +34,9 @@ import numpy as np
 
 from ..core.dictionary import Dictionary
 from ..core.errors import CommandFailed, CommandRejected, GroundStationError, LinkLostError
-from .profile import DEFAULT_GYRO_RANGE, TARGETS, Profile, ProfileError, ProfileRefused, check_profile
+from .samples import DEFAULT_GYRO_RANGE, TARGETS, Profile
+from .checks import check_profile
+from .samples import ProfileError, ProfileRefused
 
 log = logging.getLogger(__name__)
 

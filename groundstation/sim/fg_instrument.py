@@ -1,7 +1,7 @@
 """The simulated B&K 4053B function generator as an instrument: its channels, settings
 checked against `groundstation.instruments.spec4050.LIMITS`, error queue, arbitrary-waveform
 upload and the output voltage that drives the simulated base stage (`base_drive`).  No I/O:
-`scpi_server.ScpiServer` serves it on TCP; `scpi_fg` re-exports both.
+`scpi_server.ScpiServer` serves it on TCP.
 
 SCPI subset (channel prefix C1: or C2:, case-insensitive, several commands per line
 separated by ';'):
@@ -51,8 +51,7 @@ import numpy as np
 from ..core.dictionary import default_control_rate_hz
 from ..instruments import spec4050 as spec
 
-# the logger the instrument has always logged under (before the split into modules)
-log = logging.getLogger("groundstation.sim.scpi_fg")
+log = logging.getLogger(__name__)
 
 ERROR_QUEUE_DEPTH = 20
 

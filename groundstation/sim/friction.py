@@ -77,12 +77,9 @@ from ..core.errors import GroundStationError
 # the table is the testbed's fact (plant/); the models below integrate it
 from ..plant.slope_table import DEFAULT_SLOPE_TABLE, load_slope_table, validate_slope_table
 
-__all__ = [
-    "FRICTION_MODELS", "MODEL_NAMES", "FrictionParams", "FrictionConfigError",
-    "STATE_SIZE", "S_T", "S_DIR", "S_DEPTH", "S_OVERFLOW", "S_REVERSALS",
-    "S_CLOSURES", "new_state", "init_state",
-    "friction_step", "simulate_friction", "simulate_friction_kernel",
-]
+__all__ = ["FRICTION_MODELS", "MODEL_NAMES", "FrictionParams", "FrictionConfigError", "STATE_SIZE",
+           "S_T", "S_DIR", "S_DEPTH", "S_OVERFLOW", "S_REVERSALS", "S_CLOSURES", "new_state",
+           "init_state", "friction_step", "simulate_friction", "simulate_friction_kernel"]
 
 
 class FrictionConfigError(GroundStationError, ValueError):

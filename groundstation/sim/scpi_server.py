@@ -19,8 +19,7 @@ from ..link.transports import listening_socket
 from ..instruments import spec4050 as spec
 from .fg_instrument import ScpiError, SimulatedGenerator, parse_length
 
-# the logger the server has always logged under (before the split into modules)
-log = logging.getLogger("groundstation.sim.scpi_fg")
+log = logging.getLogger(__name__)
 
 MAX_LINE_BYTES = 64 * 1024                     # a text line longer than this is garbage
 MAX_UPLOAD_BYTES = 4 * 2 * spec.ARB_POINTS_MAX  # framing refuses (and drops) anything larger

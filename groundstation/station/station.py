@@ -232,7 +232,7 @@ class Station(GeneratorVerbs):
                 self._device = SimulatedDevice(self.d, pacing="manual", firmware=fw).start()
                 address = f"127.0.0.1:{self._device.tcp_port}"
                 if want_fg:
-                    from ..sim.scpi_fg import attach_generator
+                    from ..sim.scpi_server import attach_generator
                     self._fg_server = attach_generator(self._device)
                     resource = self._fg_server.resource
             else:
@@ -369,7 +369,7 @@ class Station(GeneratorVerbs):
         table is validated.  A design the validation refuses is not sent, unless
         `accept_risk` gives the reason an engineer accepts it (recorded in the history and
         the log); the device still applies its own checks."""
-        from ..params.design import load_design, table_values
+        from ..params.design_file import load_design, table_values
 
         self._check_running()
         design = load_design(path)
@@ -449,7 +449,8 @@ class Station(GeneratorVerbs):
         the device clock runs flat out meanwhile.  `max_seconds` shortens a longer profile
         (trial runs, tests) with a smooth return to rest over its last 0.2 s.  Returns the
         PlaybackResult; raises when playback did not complete."""
-        from ..profiles.profile import Profile, load_profile
+        from ..profiles.profile import load_profile
+        from ..profiles.samples import Profile
 
         prof = profile if isinstance(profile, Profile) else load_profile(profile, self.d)
         if max_seconds is not None and prof.duration > max_seconds:

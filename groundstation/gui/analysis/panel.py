@@ -43,7 +43,7 @@ from .jobs import BATCH_JOBS, AnalysisJobs, Batch
 from .live import live_available, take_snapshot
 from .plots import FrfPlots, HysteresisPlot, SpectraPlots, StepPlots, render_png
 from .runs import LIVE, RunsTable
-from .tables import METRIC_COLUMNS, VALUE_ROLE, ResultTable
+from .tables import METRIC_COLUMNS, ResultTable
 from ..common.dock_layout import controls_beside_plots
 
 TABS = ("Metrics", "PSD / CSP", "FRF", "Hysteresis", "Step")
@@ -420,4 +420,4 @@ def _loop_summary(res) -> str:
     return text
 
 
-__all__ = ["AnalysisPanel", "METRIC_COLUMNS", "TABS", "VALUE_ROLE"]
+__all__ = ["AnalysisPanel", "TABS"]

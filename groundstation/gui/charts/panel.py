@@ -48,13 +48,12 @@ from PySide6.QtWidgets import (QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushB
 from ...core.dictionary import Dictionary
 from ...live.display_buffers import TelemetryStore, insert_breaks
 from .channel_tree import ChannelInfo, channel_catalog, format_value
-from .data import (TIMEBASES, WINDOW_MAX_S, WINDOW_MIN_S,  # noqa: F401
-                   WINDOW_PRESETS_S, ChartStats, _Series, _Trace, _window_label,
-                   fetch_series, frozen_trace)
+from .data import (WINDOW_PRESETS_S, ChartStats, _Series, _Trace, _window_label, fetch_series,
+                   frozen_trace)
 from .column import PlotColumn
 from ..common.steady_label import SteadyLabel
 from .plot import ChartPlot
-from .settings import STATE_VERSION, ChartSettings  # noqa: F401
+from .settings import ChartSettings
 from .stack import PlotStack
 
 _EMPTY = np.empty(0)         # the data of a curve with nothing to show

@@ -43,7 +43,6 @@ from ...instruments import (BasicWave, FunctionGenerator4050, InstrumentLinkErro
 from ...instruments.spec4050 import arb_name_for
 from ...plant.testbed import DEFAULT_TESTBED, Testbed, load_testbed
 from .jobs import JobQueue
-from .limits_text import limit_texts, limits_source
 from .motion_check import check_uploaded_motion, newest_device_time
 from .records import (DEFAULT_TOLERANCE, SIMULATOR, CheckResult, GeneratorState,
                       ResourceChoice, UploadedProfile)
@@ -447,5 +446,4 @@ class GeneratorController(QObject):
         return result
 
 
-__all__ = ["CheckResult", "DEFAULT_TOLERANCE", "GeneratorController", "GeneratorState",
-           "ResourceChoice", "SIMULATOR", "UploadedProfile", "limit_texts", "limits_source"]
+__all__ = ["GeneratorController"]

@@ -14,9 +14,9 @@ talks to the instrument on its worker thread, `groundstation.basemotion` makes a
 checks the profiles.
 
 This module is the panel's shell (layout, status line, what needs an open generator);
-its two sides are parts of it with a module each, `fg_channel_editor` (instrument, basic
-wave, output) and `fg_base_motion` (profile, upload, check, plots), with their common
-look in `fg_styles`.  Every name is still importable from here.
+its two sides are parts of it with a module each, `channel_editor` (instrument, basic
+wave, output) and `base_motion` (profile, upload, check, plots), with their common
+look in `styles`.
 """
 
 from __future__ import annotations
@@ -26,14 +26,10 @@ from PySide6.QtWidgets import QHBoxLayout, QLabel, QSizePolicy, QVBoxLayout, QWi
 
 from ...basemotion import BaseMotionProfile
 from ..common.dock_layout import controls_beside_plots
-from .base_motion import (BASE_MOTION_DIR, LEGEND_BRUSH, MRAD, MRAD2, PENS,  # noqa: F401
-                          Z_SYNTH, Z_TARGET, BaseMotionEditor)
-from .channel_editor import (FIELD_BAD, OUTPUT_OFF_STYLE, OUTPUT_ON_STYLE,  # noqa: F401
-                             ChannelEditor)
-from .controller import (DEFAULT_TOLERANCE, SIMULATOR, CheckResult,  # noqa: F401
-                         GeneratorState, ResourceChoice, UploadedProfile, limit_texts,
-                         limits_source)
-from .styles import BAD_STYLE, OK_STYLE, SMALL_STYLE, WARN_STYLE, _spin  # noqa: F401
+from .base_motion import BaseMotionEditor
+from .channel_editor import ChannelEditor
+from .records import CheckResult, GeneratorState
+from .styles import BAD_STYLE, WARN_STYLE
 from ..session.session import Session
 
 

@@ -24,8 +24,9 @@ from ...core.dictionary import Dictionary, ParameterDef
 from ...core.errors import GroundStationError
 from ...params import table as ptable
 from ...params.compare import three_way, wire_value
-from ...params.design import ControllerDesign, load_design, table_values
-from ...params.loop import ValidationReport, bode, report_lines, validate
+from ...params.design_file import ControllerDesign, load_design, table_values
+from ...params.loop import ValidationReport, report_lines, validate
+from ...params.loop_response import bode
 from ...params.upload import ActiveTable, UploadRecord
 from ..session.session import Session
 
