@@ -144,7 +144,7 @@ def campaign(tmp: str, pacing: FastPacing, between_steps: str, fast_sim: str,
                  between_steps=between_steps, fast_sim=fast_sim) as tb:
         tb.upload_design(ROOT / "profiles" / "controllers" / "relative_design2.toml")
         tb.start_recording("bench")
-        timers = _Timers(tb._device, tb) if profile else None
+        timers = _Timers(tb.simulator, tb) if profile else None
         if timers:
             timers.take(tb.clock)
         t0 = time.perf_counter()

@@ -180,3 +180,30 @@ def test_the_control_rate_is_not_a_literal():
                     and node.value == 1200):
                 offenders.append(f"{name}:{node.lineno}")
     assert not offenders, f"literal control rate 1200 in code: {offenders}"
+
+
+#: what builds a rig: a simulated testbed, a device link, a generator
+RIG_BUILDERS = ("open_client", "DeviceClient", "SimulatorProcess", "SteppedSimulatorProcess",
+                "open_generator")
+#: where they may be called: station/rig.py (the one place), the packages that define them
+#: (link/, sim/ - a simulator serves its own generator - and instruments/)
+RIG_HOMES = ("station/rig.py", "link/", "sim/", "instruments/")
+
+
+def test_only_the_rig_module_builds_a_simulator_a_link_or_a_generator():
+    """A script's Station, the keeper, the window and the `fg` commands all start the
+    simulated testbed, open the link and open the generator through station/rig.py, so
+    they are started, watched (the local device's liveness) and bounded (the generator's
+    safety limits) the same way everywhere."""
+    offenders = []
+    for path in sorted(PKG.rglob("*.py")):
+        name = path.relative_to(PKG).as_posix()
+        if name.startswith(RIG_HOMES):
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Call):
+                called = (node.func.id if isinstance(node.func, ast.Name) else
+                          node.func.attr if isinstance(node.func, ast.Attribute) else "")
+                if called in RIG_BUILDERS:
+                    offenders.append(f"{name}:{node.lineno}: {called}()")
+    assert not offenders, offenders

@@ -32,7 +32,7 @@ def run_campaign(path, tmp_path, *, max_step_seconds=1.0, resume=None, operator=
                  history=tmp_path / "history", operator=operator) as tb:
         report = CampaignRunner(c, tb, max_step_seconds=max_step_seconds).run(resume)
         generator_on = tb.generator.get_output(1) if tb.generator is not None else None
-        armed = tb._device.firmware.armed            # the device itself, not telemetry in flight
+        armed = tb.simulator.firmware.armed            # the device itself, not telemetry in flight
     return report, generator_on, armed
 
 

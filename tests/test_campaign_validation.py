@@ -228,8 +228,8 @@ def test_ctrl_c_in_a_step_ends_the_campaign_cleanly(tmp_path, monkeypatch):
                  history=tmp_path / "history") as tb:
         report = CampaignRunner(c, tb).run()
         generator_on = tb.generator.get_output(1)
-        armed = tb._device.firmware.armed
-        mode = tb._device.firmware.mode
+        armed = tb.simulator.firmware.armed
+        mode = tb.simulator.firmware.mode
     assert report.status == "interrupted"
     assert report.completed_runs == [1] and report.failed_run == 2
     assert report.reason.endswith("dwell: interrupted by the operator (Ctrl-C)")

@@ -29,7 +29,7 @@ def commander(tmp_path):
             tb.arm()
             tb.set_currents(coarse_a=0.02)
             for _ in range(2000):                  # bounded: at most ~200 s of device time
-                if release.is_set() or not tb._device.firmware.armed:
+                if release.is_set() or not tb.simulator.firmware.armed:
                     break
                 tb.dwell(0.1)
         except Exception as exc:                   # the viewer's ABORT may end a command
@@ -65,7 +65,7 @@ def test_a_watching_window_is_live_read_only_and_can_abort(gui_window, qtbot, co
     session.sig_event.connect(lambda level, source, text: errors.append(text))
     session.command("DISARM")
     qtbot.waitUntil(lambda: any(reason in e for e in errors), timeout=5000)
-    assert commander._device.firmware.armed
+    assert commander.simulator.firmware.armed
 
     # the viewer records a normal log of what it watches
     path = session.start_recording(str(tmp_path / "viewer"), "watched")
@@ -73,7 +73,7 @@ def test_a_watching_window_is_live_read_only_and_can_abort(gui_window, qtbot, co
     qtbot.waitUntil(lambda: hr.latest("tick") > before + 600, timeout=20000)
 
     win.commands.abort_button.click()            # ABORT straight to the device
-    qtbot.waitUntil(lambda: not commander._device.firmware.armed, timeout=10000)
+    qtbot.waitUntil(lambda: not commander.simulator.firmware.armed, timeout=10000)
     qtbot.waitUntil(lambda: hr.latest("armed") is not None and not bool(hr.latest("armed")),
                     timeout=10000)
     session.stop_recording()

@@ -106,7 +106,7 @@ def test_link_loss_is_shown_and_the_link_comes_back(qtbot, window, tmp_path):
     ring = window.session.store.ring("HIGH_RATE")
     qtbot.waitUntil(lambda: ring.snapshot([], seconds=0.0).device_time[-1:].sum() > 1.5, timeout=15000)
     before = hr_frames(window)
-    window.session.sim.proc.kill()                           # the simulator dies
+    window.session.sim.process.kill()                        # the simulator dies
     qtbot.waitUntil(lambda: "LINK LOST" in window.connection.health.text()
                     or "LINK FAILED" in window.connection.health.text(), timeout=15000)
     assert hr_frames(window) >= before                       # nothing received is lost

@@ -24,8 +24,8 @@ def test_an_exception_inside_the_block_leaves_the_rig_safe(tmp_path):
             tb.generator_set(1, waveform="SINE", frequency_hz=2.0, amplitude_vpp=0.3)
             path = tb.start_recording("crash", notes="an exception mid-run")
             tb.dwell(0.5)
-            assert tb._device.firmware.armed and tb.generator.get_output(1)
-            fw, gen = tb._device.firmware, tb.generator
+            assert tb.simulator.firmware.armed and tb.generator.get_output(1)
+            fw, gen = tb.simulator.firmware, tb.generator
             raise RuntimeError("the script's own bug")
     assert not fw.armed and fw.mode == 0                      # ABORT: drives off, IDLE
     assert gen.closed                                         # and its output was switched off first
@@ -48,6 +48,6 @@ def test_verbs_refuse_what_they_cannot_do(tmp_path):
         with pytest.raises(ScriptError, match="nothing is recording"):
             tb.stop_recording()
         record = tb.upload_design(ROOT / "profiles/controllers/relative_design2.toml")
-        assert tb._device.firmware.param_crc == record.crc
+        assert tb.simulator.firmware.param_crc == record.crc
         result = tb.play(ROOT / "profiles/waveforms/step_relative_1mrad.toml")
-        assert result.completed and not tb._device.firmware.armed
+        assert result.completed and not tb.simulator.firmware.armed

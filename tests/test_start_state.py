@@ -67,7 +67,7 @@ def test_recentring_brings_the_los_back_onto_the_autocollimator_and_says_so_in_t
         path = tb.start_recording("recentre")
         state = tb.settle(max_seconds=5.0, recentre=recentre)
         tb.stop_recording()
-        assert not tb._device.firmware.armed                  # recentred, then disarmed
+        assert not tb.simulator.firmware.armed                  # recentred, then disarmed
         assert "recentre_inertial.toml" in tb.history.records()[-1].source   # validated upload
     assert abs(state["autocollimator_rad"]) < 0.9 * 0.33 * DEG and abs(state["outer_rad"]) < 0.9 * 0.33 * DEG
     with LogReader(path) as log:

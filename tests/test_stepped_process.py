@@ -110,7 +110,7 @@ def test_a_session_with_the_process_simulator_and_its_generator(tmp_path):
     talks SCPI to it and the base stage moves the telemetry's base encoder."""
     with Testbed("sim", testbed=TESTBEDS_DIR / "inertial_2dof.toml", fast=True,
                  fast_sim="process", log_folder=tmp_path) as tb:
-        assert tb.generator is not None and tb._device.fg_resource
+        assert tb.generator is not None and tb.simulator.fg_resource
         tb.dwell(0.5)
         assert tb.state.tick >= 600
 

@@ -63,22 +63,16 @@ def _default_testbed() -> Path:
 def _generator(args, testbed, on_sim=None):
     """The opened generator (and the simulated testbed behind `--resource sim`; once the
     generator is open, the testbed's command address goes to `on_sim`)."""
-    from ..instruments import SafetyLimits, open_generator
-    from ..sim.process import SimulatorProcess
+    from ..station.rig import open_testbed_generator, start_simulator
 
     sim = None
     resource, backend = args.resource, args.backend
     if resource == SIM:
-        sim = SimulatorProcess(pacing="realtime", testbed=str(testbed.path), fg_port=0)
-        address = sim.start()
+        sim = start_simulator(testbed.path, generator=True)
         resource, backend = sim.fg_resource, "@py"
-        if not resource:
-            sim.stop()
-            raise GroundStationError("the simulated testbed did not announce its function generator")
-        print(f"started the simulated testbed on {address}, generator on {resource}", flush=True)
+        print(f"started the simulated testbed on {sim.address}, generator on {resource}", flush=True)
     try:
-        fg = open_generator(resource, backend=backend, limits=SafetyLimits.from_testbed(testbed),
-                            timeout_s=args.timeout)
+        fg = open_testbed_generator(resource, testbed, backend=backend, timeout_s=args.timeout)
         try:
             if sim is not None and on_sim is not None:
                 on_sim(sim.address)
@@ -294,11 +288,11 @@ def _cmd_upload(args) -> int:
 
     def start_watching(address: str) -> None:
         from ..core.dictionary import load_dictionary
-        from ..link import open_client
+        from ..station.rig import open_link
 
         d = load_dictionary(args.protocol_dir)
         enc = _BaseEncoder(d.control_rate_hz, profile.duration_s + settle + 30.0)
-        client = open_client(d, address)
+        client = open_link(d, address)
         packet_rate = next((p.rate_hz for p in d.packets if p.name == "HIGH_RATE"), None)
         watch.update(client=client, encoder=enc, rate=float(packet_rate or d.control_rate_hz))
         client.subscribe(enc)

@@ -49,21 +49,18 @@ def send_abort(dictionary, device: dict[str, Any] | None, watching: str, *,
                on_result=None, connect_timeout: float = 2.0):
     """ABORT on a connection of this console's own; returns the CommandResult.
     `on_result(result)` hears how it ended, refused or timed out too (for the journal)."""
-    from ..link.client import DeviceClient
-    from ..link.transports import TcpStream
+    from ..link.address import open_command_link
 
     host, port = abort_target(device, watching)
     try:
-        stream = TcpStream(host, port, connect_timeout=connect_timeout)
+        client = open_command_link(dictionary, host, port, connect_timeout=connect_timeout)
     except LinkError as exc:
         raise AbortUnreachable(f"ABORT: cannot reach the device at {host}:{port} from this "
                                f"console ({exc}) - press Abort (Esc) on the commanding "
                                f"station") from None
-    client = DeviceClient(dictionary, stream, None, heartbeat=False)
     if on_result is not None:
         client.add_command_listener(on_result)
     try:
-        client.start()
         return client.command("ABORT")
     finally:
         client.close()

@@ -94,6 +94,14 @@ def open_client(dictionary: Dictionary, address: DeviceAddress | str, *,
     return _started(DeviceClient(dictionary, stream, udp, heartbeat=heartbeat))
 
 
+def open_command_link(dictionary: Dictionary, host: str, port: int, *,
+                      connect_timeout: float = 2.0) -> DeviceClient:
+    """A started client on a command connection of its own, without telemetry and without
+    a heartbeat: for one command that needs no session (a console's ABORT)."""
+    return _started(DeviceClient(dictionary, TcpStream(host, port, connect_timeout=connect_timeout),
+                                 None, heartbeat=False))
+
+
 def _started(client: DeviceClient) -> DeviceClient:
     client.start()
     return client

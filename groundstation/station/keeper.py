@@ -15,7 +15,9 @@ from typing import Callable
 
 from ..core.dictionary import Dictionary
 from ..core.errors import GroundStationError
+from ..core.kinds import SIMULATED_DEVICE
 from ..link.client import DeviceClient
+from .rig import LocalSimulator, open_link, start_simulator
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +54,7 @@ class LinkKeeper:
         self.on_client = on_client
         self.say = say
         self.client: DeviceClient | None = None
-        self.sim = None
+        self.sim: LocalSimulator | None = None
         self.address = ""
         self.reconnects = 0
         self._detach: Callable[[], None] | None = None
@@ -60,21 +62,17 @@ class LinkKeeper:
     def open(self) -> DeviceClient:
         """Start the simulator if asked for, open the link and connect; raises
         GroundStationError (with the device's reason) if that fails."""
-        from ..sim.process import SimulatorProcess
-        from ..link.address import open_client
-
-        if self.device == "sim":
-            if self.sim is None or self.sim.proc is None or self.sim.proc.poll() is not None:
+        if self.device == SIMULATED_DEVICE:
+            if self.sim is None or self.sim.gone():
                 if self.sim is not None:
                     self.sim.stop()
-                self.sim = SimulatorProcess(pacing="realtime", testbed=self.testbed)
-                self.address = self.sim.start()
+                self.sim = start_simulator(self.testbed)
+                self.address = self.sim.address
                 self.say(f"started the simulated testbed on {self.address}")
         else:
             self.address = self.device
-        client = open_client(self.dictionary, self.address)
-        if self.device == "sim":                  # started here: its liveness is known
-            client.device_gone = self.sim.gone
+        client = open_link(self.dictionary, self.address,
+                           local=self.sim if self.device == SIMULATED_DEVICE else None)
         self.client = client
         if self.on_client is not None:
             self._detach = self.on_client(client)

@@ -46,21 +46,21 @@ from .clock import FastPacing, ScriptAborted, SteppedClock, WallClock
 from ..core.contracts import BaseMotionInstrument
 from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import GroundStationError
-from ..link import open_client
+from ..core.kinds import SIMULATED_DEVICE, BetweenSteps, FastSim
 from ..link.client import DeviceClient
 from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
 from .generator_verbs import GeneratorVerbs
 from .recording import RecordingSlot, device_record
+from .rig import (LocalSimulator, named_generator, open_link, open_testbed_generator,
+                  start_simulator, wants_simulated_generator)
 from .settling import settle_rig
 from .start_state import StartCriteria
 from .tracker import DeviceStateTracker
 
 log = logging.getLogger(__name__)
 
-#: where a fast simulated device runs: in this process, or in a child process of its own
-FAST_SIMS = ("inline", "process")
 
 #: the commands that change the parameter table: only ParameterLoader sends them, and
 #: only for a cleared table (Station.command refuses them)
@@ -85,11 +85,13 @@ class Station(GeneratorVerbs):
                  echo: Callable[[str], None] | None = None,
                  publish: str | None = None, curve_keys: str | None = None,
                  pacing: FastPacing | None = None, between_steps: str = "held",
-                 fast_sim: str = "inline"):
-        if fast_sim not in FAST_SIMS:
-            raise ValueError(f"fast_sim must be one of {', '.join(FAST_SIMS)}, not {fast_sim!r}")
+                 fast_sim: FastSim | str = FastSim.INLINE):
+        try:
+            fast_sim = FastSim(fast_sim)
+        except ValueError:
+            raise ValueError(f"fast_sim must be one of {', '.join(FastSim)}, not {fast_sim!r}") from None
         self.device_spec = device
-        #: fast only: where the simulated device runs (FAST_SIMS)
+        #: fast only: where the simulated device runs
         self.fast_sim = fast_sim
         #: fast only: how the stepped clock paces the device (clock.py)
         self.pacing, self.between_steps = pacing, between_steps
@@ -119,9 +121,8 @@ class Station(GeneratorVerbs):
         self.generator: BaseMotionInstrument | None = None
         self.recording = RecordingSlot(self.echo)
         self.last_upload = None
-        self._device = None          # SimulatedDevice or SteppedSimulatorProcess (fast)
-        self._fg_server = None
-        self._sim = None             # SimulatorProcess (real-time simulation)
+        #: the simulated testbed this session started (station/rig.py), if any
+        self._local: LocalSimulator | None = None
         #: attach(): the client belongs to someone else (the GUI's session) - close() leaves
         #: it open; likewise a generator driver passed in is not ours to close
         self._attached = False
@@ -162,9 +163,8 @@ class Station(GeneratorVerbs):
         client.subscribe(st.state)
         st.clock = WallClock(client, st.abort_event)
         if isinstance(generator, str):
-            from ..instruments.fg4050 import open_generator
             try:
-                st.generator = open_generator(generator, testbed=st.testbed)
+                st.generator = open_testbed_generator(generator, st.testbed)
             except BaseException:
                 client.unsubscribe(st.state)
                 raise
@@ -181,7 +181,13 @@ class Station(GeneratorVerbs):
     @property
     def simulated(self) -> bool:
         """True when this session started the simulated testbed it talks to."""
-        return self._device is not None or self._sim is not None
+        return self._local is not None
+
+    @property
+    def simulator(self):
+        """The fast simulated device this session steps (a SimulatedDevice in this process,
+        whose firmware a script may inspect, or a SteppedSimulatorProcess), else None."""
+        return self._local.stepped if self._local is not None else None
 
     @property
     def recorder(self):
@@ -215,47 +221,23 @@ class Station(GeneratorVerbs):
             raise
 
     def _open(self) -> None:
-        resource = None
-        want_fg = (self.generator_spec == "auto" and self.testbed.inertial) or self.generator_spec == "sim"
-        if self.device_spec == "sim":
-            if self.fast and self.fast_sim == "process":
-                from ..sim.stepped_process import SteppedSimulatorProcess
-                self._device = SteppedSimulatorProcess(
-                    self.d, testbed=self.testbed.path, seed=self.seed, generator=want_fg).start()
-                address = f"127.0.0.1:{self._device.tcp_port}"
-                resource = self._device.fg_resource
-            elif self.fast:
-                from ..sim.device import SimulatedDevice
-                from ..sim.firmware import Firmware
-
-                fw = Firmware(self.d, seed=self.seed, testbed=self.testbed)
-                self._device = SimulatedDevice(self.d, pacing="manual", firmware=fw).start()
-                address = f"127.0.0.1:{self._device.tcp_port}"
-                if want_fg:
-                    from ..sim.scpi_server import attach_generator
-                    self._fg_server = attach_generator(self._device)
-                    resource = self._fg_server.resource
-            else:
-                from ..sim.process import SimulatorProcess
-                self._sim = SimulatorProcess(pacing="realtime", seed=self.seed,
-                                             testbed=str(self.testbed.path), speed=self.speed,
-                                             fg_port=0 if want_fg else None)
-                address = self._sim.start()
-                resource = self._sim.fg_resource
+        resource = named_generator(self.generator_spec)
+        if self.device_spec == SIMULATED_DEVICE:
+            self._local = start_simulator(
+                self.testbed.path, dictionary=self.d, fast=self.fast, fast_sim=self.fast_sim,
+                seed=self.seed, speed=self.speed,
+                generator=wants_simulated_generator(self.generator_spec, inertial=self.testbed.inertial))
+            address, resource = self._local.address, self._local.fg_resource
         else:
             address = self.device_spec
-            if self.generator_spec not in (None, "auto", "none", "sim"):
-                resource = self.generator_spec
         self.address = address
         self.echo(f"device {address}" + (f", generator {resource}" if resource else ""))
+        stepped = self.simulator
         # held between steps, the fast device's time passes only when the stepped clock
         # runs it, and the clock counts the host as heard after every run (device-time
         # heartbeats): a wall-time heartbeat would only land at random ticks
-        held = self._device is not None and self.between_steps == "held"
-        self.client = open_client(self.d, address, heartbeat=not held)
-        local = self._device or self._sim        # started here: its liveness is known
-        if local is not None:
-            self.client.device_gone = local.gone
+        held = stepped is not None and self.between_steps == BetweenSteps.HELD
+        self.client = open_link(self.d, address, local=self._local, heartbeat=not held)
         self.client.subscribe(self.state)
         if self.publish:               # before CONNECT: viewers see the session begin
             from ..fanout.publisher import Publisher
@@ -263,13 +245,12 @@ class Station(GeneratorVerbs):
             self.publisher.attach(self.client, address)
             self.echo(f"publishing on {self.publisher.endpoint}")
         self.client.connect(take_over=self.take_over)
-        self.clock = (SteppedClock(self._device, self.client, self.abort_event, pacing=self.pacing,
+        self.clock = (SteppedClock(stepped, self.client, self.abort_event, pacing=self.pacing,
                                    between_steps=self.between_steps,
                                    recorder_backlog=self.recording.backlog)
-                      if self._device else WallClock(self.client, self.abort_event))
+                      if stepped is not None else WallClock(self.client, self.abort_event))
         if resource:
-            from ..instruments.fg4050 import open_generator
-            self.generator = open_generator(resource, testbed=self.testbed)
+            self.generator = open_testbed_generator(resource, self.testbed)
 
     def close(self) -> None:
         """Close everything this session opened (after make_safe)."""
@@ -574,12 +555,9 @@ class Station(GeneratorVerbs):
             publisher.close()
 
     def _stop_sim(self) -> None:
-        dev, self._device = self._device, None
-        if dev is not None:
-            dev.stop()
-        sim, self._sim = self._sim, None
-        if sim is not None:
-            sim.stop()
+        local, self._local = self._local, None
+        if local is not None:
+            local.stop()
 
 
 def _shortened(profile, seconds: float):

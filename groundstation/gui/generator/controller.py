@@ -39,9 +39,10 @@ from PySide6.QtCore import QObject, Signal
 from ...basemotion import BaseMotionProfile, BaseStageModel, PsdTable, load_psd, make_profile
 from ...core.errors import GroundStationError
 from ...instruments import (BasicWave, FunctionGenerator4050, InstrumentLinkError, SafetyLimits,
-                            SettingRefusedError, list_resources, open_generator)
+                            SettingRefusedError, list_resources)
 from ...instruments.spec4050 import arb_name_for
 from ...plant.testbed import DEFAULT_TESTBED, Testbed, load_testbed
+from ...station.rig import open_testbed_generator
 from .jobs import JobQueue
 from .motion_check import check_uploaded_motion, newest_device_time
 from .records import (DEFAULT_TOLERANCE, SIMULATOR, CheckResult, GeneratorState,
@@ -233,8 +234,8 @@ class GeneratorController(QObject):
 
         def job(epoch):
             self._close_now()
-            fg = open_generator(address, backend=self.backend, limits=limits,
-                                timeout_s=self.timeout_s)
+            fg = open_testbed_generator(address, limits=limits, backend=self.backend,
+                                        timeout_s=self.timeout_s)
             self.fg, self.resource, self.limits = fg, address, limits
             self.state = None
             self._record("open", {"identity": str(fg.identity), "limits": asdict(limits)})

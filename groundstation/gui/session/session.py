@@ -27,7 +27,8 @@ from PySide6.QtCore import QObject, QTimer, Signal
 
 from ...core.dictionary import Dictionary
 from ...core.errors import GroundStationError
-from ...link import DeviceClient, open_client
+from ...core.kinds import SIMULATED_DEVICE
+from ...link import DeviceClient
 from ...logs import Recorder, ReplaySource
 from ...logs.live import attach_recorder
 from ...logs.summary import event_markers
@@ -35,8 +36,9 @@ from .consoles import ConsoleMixin
 from .profiles import ProfilePlaybackMixin
 from ...live.limits import LimitMonitor
 from ...params.upload import ParameterHistory
-from ...sim.process import SimulatorProcess
 from ...station.recording import device_record
+from ...station.keeper import RECONNECT_DELAYS_S
+from ...station.rig import LocalSimulator, open_link, start_simulator
 from ...station.station import Station
 from ...live.display_buffers import TelemetryStore
 from .campaign_runner import CampaignController
@@ -45,7 +47,6 @@ from .commands import CommandQueue
 
 log = logging.getLogger(__name__)
 
-RECONNECT_DELAYS_S = (1.0, 2.0, 4.0, 8.0, 10.0)
 #: the telemetry reader's batches in the window: it draws at 30 Hz and only shows the
 #: limits, so 25 ms batches lose nothing, and the reader thread costs a third less than
 #: with the link's default 10 ms (bench_gui.py; arrival times stay the kernel's)
@@ -83,7 +84,7 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         #: the Station verbs on the live link (attached when it comes up, closed with it)
         self.station: Station | None = None
         self.replay: ReplaySource | None = None
-        self.sim: SimulatorProcess | None = None
+        self.sim: LocalSimulator | None = None
         #: the endpoint this window watches read-only (fanout.WatchClient as self.client;
         #: no Station: the verbs say "not connected"), or None
         self.watching: str | None = None
@@ -147,7 +148,7 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
     def fg_resource(self) -> str | None:
         """The simulator's function generator (a VISA resource), when it is running."""
         sim = self.sim
-        return sim.fg_resource if sim is not None and sim.proc is not None else None
+        return sim.fg_resource if sim is not None and not sim.gone() else None
 
     def _start_link(self, address: str) -> None:
         self.close_replay()
@@ -185,16 +186,13 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         try:
             address = self.address
             if address == "sim":
-                if self.sim is None or self.sim.proc is None:
+                if self.sim is None or self.sim.gone():
                     # with its function generator, so the GUI always has one to drive
-                    sim = SimulatorProcess(pacing="realtime", testbed=self.testbed, fg_port=0,
-                                           speed=self.sim_speed)
-                    sim.start()
+                    sim = start_simulator(self.testbed, speed=self.sim_speed, generator=True)
                     self.sim, self._sim_testbed = sim, self.testbed
                 address = self.sim.address
-            client = open_client(self.d, address)
-            if self.address == "sim":              # started here: its liveness is known
-                client.device_gone = self.sim.gone
+            client = open_link(self.d, address,
+                               local=self.sim if self.address == SIMULATED_DEVICE else None)
             client.telemetry_batch_s = TELEMETRY_BATCH_S
             client.subscribe(self.store)
             client.subscribe(self.limits)
@@ -297,8 +295,7 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         old, self.client = self.client, None
         if old is not None:
             self._worker(old.close, "gs-close-lost")
-        if self.address == "sim" and self.sim is not None and (
-                self.sim.proc is None or self.sim.proc.poll() is not None):
+        if self.address == SIMULATED_DEVICE and self.sim is not None and self.sim.gone():
             self.generator.close()                # its generator went with it
             self.sim.stop()
             self.sim = None                       # start a fresh simulator
