@@ -12,7 +12,7 @@ client records when each HIGH_RATE frame arrives against its tick, and we report
 lateness distribution (arrival - (t0 + tick/1200), t0 fitted as the earliest possible)
 and the simulator process's CPU use from /proc.
 
-Speed factor (--speed-seconds, default 1; moved here from tests/test_sim_speed.py,
+Speed factor (--speed-seconds, default 1; moved here from tests/sim/test_sim_speed.py,
 which now checks the pacing law on a controlled clock): device ticks per wall second of
 the paced simulator at `speed` 1 and 5, in this process and as `groundstation sim
 --speed 5`, against 1200 x speed; the tolerance is 0.85-1.1 (in process) and 0.8-1.2

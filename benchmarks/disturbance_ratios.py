@@ -41,7 +41,7 @@ from groundstation.plant.testbed import load_testbed  # noqa: E402
 CONTROLLERS = ROOT / "profiles" / "controllers"
 DEFAULT_DESIGNS = [CONTROLLERS / "inertial_design1.toml", CONTROLLERS / "inertial_design2.toml"]
 DEFAULT_FREQS_HZ = "0.2,0.5,1,2,3,4,5,5.6,6,7,8,10,15,20"
-# testbed.md §9a, as stated (the test tests/test_inertial_margins.py holds the loop to them)
+# testbed.md §9a, as stated (the test tests/params/test_inertial_margins.py holds the loop to them)
 REFERENCE_MARGINS = ("rate loop (Design #1): crossover ~15 Hz, PM ~40 deg, GM >= 10 dB, bandwidth ~25 Hz; "
                      "outer loop K_p = 25: GM ~10 dB, PM ~80 deg, ~5 Hz bandwidth")
 

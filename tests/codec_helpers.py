@@ -1,4 +1,4 @@
-"""Shared helpers of the tests/test_codec_*.py files: frames built with the codec, patched
+"""Shared helpers of the tests/codec/test_codec_*.py files: frames built with the codec, patched
 with a fresh CRC, fed to a deframer in chunks, and the deframers' counters read back."""
 
 from __future__ import annotations

@@ -47,7 +47,7 @@ of travel: selecting samples by their own noisy torque, or regressing ψ on the 
 would bias the slope (upwards, by several % near x = 0 at the rig's current resolution).
 The branches are combined by averaging their compliances 1/slope (travel per torque: one
 nearly flat stretch cannot dominate) and inverting the mean.  With the rig's rate and
-noise (tests/test_analysis_friction.py) f comes out within ~8 % over the first 2 % of
+noise (tests/analysis/test_analysis_friction.py) f comes out within ~8 % over the first 2 % of
 the swing, where a branch has only a few dozen samples, and within ~3 % beyond.
 
 Then, documented choices, so that the result is a table plant/slope_table.py accepts:

@@ -104,7 +104,7 @@ class _Periodograms:
     """The same segments' periodograms as scipy.signal.welch, summed with one batched
     FFT per piece.  scipy's welch (1.17) detrends and transforms segment by segment; on
     the hour of an hour-long log that is 4x slower than the batch, and the chunked
-    reader feeds many pieces.  tests/test_analysis_spectra.py checks the two agree."""
+    reader feeds many pieces.  tests/analysis/test_analysis_spectra.py checks the two agree."""
 
     def __init__(self, rate_hz: float, nperseg: int):
         self.nperseg = nperseg

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 # the analysis package's choices, repeated here so that parsing needs no numpy
-# (tests/test_analysis_log.py checks they are the same)
+# (tests/analysis/test_analysis_log.py checks they are the same)
 METRICS = ("jitter", "energy", "psd")
 #: asked for by name only (not in the default): analysis/log_identification.py,
 #: log_step.py, log_friction_velocity.py

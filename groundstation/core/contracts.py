@@ -12,7 +12,7 @@ so that another implementation can stand in without an adapter:
 - `BaseMotionInstrument`: the base-disturbance function generator as a session drives
   it (instruments.fg4050.FunctionGenerator4050).
 
-tests/test_contracts.py checks that each implementation satisfies its contract, method
+tests/core/test_contracts.py checks that each implementation satisfies its contract, method
 names and call signatures alike.  Nothing here imports beyond the standard library.
 """
 

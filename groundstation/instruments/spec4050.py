@@ -97,7 +97,7 @@ _BOTH = lambda low, high: dict(high_z=(low, high), fifty_ohm=(low, high))   # no
 
 #: The 4053B's limits, one row per (quantity, range): every check of the driver, every
 #: refusal of the simulated instrument and every limit text of the GUI is derived from
-#: these rows (tests/test_fg_limits_table.py holds the three to it).  The order is the
+#: these rows (tests/instruments/test_fg_limits_table.py holds the three to it).  The order is the
 #: order of the checks, so the first refusal named is the same everywhere.
 LIMITS: tuple[Limit, ...] = (
     Limit("frequency", "Hz", waveforms=("SINE",), field="FRQ", **_BOTH(1e-6, 10e6),

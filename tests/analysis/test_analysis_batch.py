@@ -1,0 +1,204 @@
+"""`groundstation analyze FOLDER --table OUT` on Dask (analysis/batch*.py): a folder of
+short logs from the fast simulator - a two-run campaign with its report, a script's log
+in a subfolder - plus a file that is not HDF5 and a log cut off half-way.  The local
+cluster's table must equal the serial loop's exactly, the bad files must be rows with
+their errors, and the CLI's Parquet and CSV must read back as that table."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+from groundstation import Testbed
+from groundstation.analysis.batch import (TABLE_KEYS, BatchOptions, analyze_one, campaign_index,
+                                          find_logs, run_serial)
+from groundstation.analysis.batch_dask import run_dask
+from groundstation.analysis.batch_table import read_table, rows_frame, table_paths
+from groundstation.campaign import CampaignRunner, load_campaign
+from groundstation.cli.main import main
+
+ROOT = Path(__file__).resolve().parents[2]
+SEED_CAMPAIGN, SEED_SCRIPT = 7, 3
+#: the relative testbed has no autocollimator: every log is scored on the inner encoder
+OPTIONS = BatchOptions(sensor="encoder_inner")
+SENSOR = ["--sensor", "encoder_inner"]
+
+CAMPAIGN = """
+[campaign]
+name = "batch_test"
+description = "two short runs: open loop and relative Design #2"
+testbed = "{root}/profiles/testbeds/relative_2dof.toml"
+
+[matrix]
+design = ["open_loop", "{root}/profiles/controllers/relative_design2.toml"]
+
+[[setup]]
+action = "connect"
+
+[[run]]
+action = "start_recording"
+name = "{{campaign}}_{{design_stem}}"
+notes = "{{design_stem}} at rest"
+
+[[run]]
+action = "upload_design"
+design = "{{design}}"
+skip_if = {{design = "open_loop"}}
+
+[[run]]
+action = "set_mode"
+mode = "RELATIVE"
+skip_if = {{design = "open_loop"}}
+
+[[run]]
+action = "dwell"
+seconds = 1.0
+
+[[run]]
+action = "stop_recording"
+"""
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    """campaign/ (two logs and report.json), script/ (one log), corrupt.h5, half.h5."""
+    top = tmp_path_factory.mktemp("batch_logs")
+    camp = top / "campaign"
+    camp.mkdir()
+    spec = top / "batch_test.toml"
+    spec.write_text(CAMPAIGN.format(root=ROOT))
+    c = load_campaign(spec)
+    with Testbed("sim", testbed=c.testbed, fast=True, seed=SEED_CAMPAIGN, generator=None,
+                 log_folder=camp, history=top / "history") as tb:
+        report = CampaignRunner(c, tb).run()
+    assert report.status == "completed", report.summary()
+    report.save(camp / "report.json")
+    script = top / "script"
+    with Testbed("sim", testbed=ROOT / "profiles/testbeds/inertial_2dof.toml", fast=True,
+                 seed=SEED_SCRIPT, generator=None, log_folder=script,
+                 history=top / "history") as tb:
+        tb.start_recording("script", notes=f"open loop, constant currents, seed={SEED_SCRIPT}")
+        tb.set_mode("OPEN_LOOP")
+        tb.arm()
+        tb.set_currents(0.05, 0.01)
+        tb.dwell(1.5)
+        entry = tb.stop_recording()
+    whole = Path(entry["files"][0])
+    (top / "corrupt.h5").write_bytes(b"this is not an HDF5 file\n" * 40)
+    data = whole.read_bytes()
+    (top / "half.h5").write_bytes(data[:len(data) // 2])      # a copy cut off half-way
+    return top
+
+
+@pytest.fixture(scope="module")
+def serial_rows(folder):
+    paths = find_logs([folder])
+    return paths, run_serial(paths, OPTIONS, campaign_index(paths))
+
+
+def test_the_folder_is_found_whole_and_sorted(folder, serial_rows):
+    paths, _ = serial_rows
+    assert [p.relative_to(folder).parts[0] for p in paths] == \
+        ["campaign", "campaign", "corrupt.h5", "half.h5", "script"]
+    assert find_logs([str(folder / "*.h5")]) == [folder / "corrupt.h5", folder / "half.h5"]
+    assert find_logs([folder / "campaign", str(folder / "campaign/*.h5")]) == paths[:2]
+
+
+def test_the_local_cluster_gives_the_serial_table_exactly(serial_rows):
+    paths, rows = serial_rows
+    seen = []
+    dask_rows = run_dask(paths, OPTIONS, campaign_index(paths), workers=2,
+                         progress=lambda done, total: seen.append((done, total)))
+    assert seen == [(k, len(paths)) for k in range(1, len(paths) + 1)]
+    assert [r["path"] for r in dask_rows] == [str(p) for p in paths]
+    assert [list(r) for r in dask_rows] == [TABLE_KEYS] * len(paths)
+    pd.testing.assert_frame_equal(rows_frame(dask_rows, TABLE_KEYS), rows_frame(rows, TABLE_KEYS),
+                                  check_exact=True)
+
+
+def test_each_row_says_who_the_run_was(serial_rows):
+    _, rows = serial_rows
+    open_loop, design2, _, _, script = rows                  # in the order of the paths
+    for row, run, design in ((open_loop, 1, "open_loop"), (design2, 2, "relative_design2")):
+        assert (row["campaign"], row["campaign_run"], row["design"]) == ("batch_test", run, design)
+        assert row["test_name"] == f"batch_test_{design}" and row["clean_close"] is True
+        assert row["error"] == "" and row["frames"] >= 1200 and row["std_urad"] is not None
+        assert row["bytes"] == Path(row["path"]).stat().st_size
+        assert row["seed"] is None           # the station does not record the simulator's seed
+    # no campaign report beside it: the log's own record, the seed from its notes
+    assert (script["campaign"], script["campaign_run"], script["design"]) == ("", None, "")
+    assert script["seed"] == SEED_SCRIPT and script["error"] == ""
+    assert script["energy_total_j"] > 0
+
+
+def test_bad_files_are_rows_with_their_error(serial_rows):
+    _, rows = serial_rows
+    corrupt = next(r for r in rows if r["log"] == "corrupt.h5")
+    half = next(r for r in rows if r["log"] == "half.h5")
+    assert "not an HDF5 file" in corrupt["error"]
+    assert "truncated" in half["error"]
+    for row in (corrupt, half):
+        assert row["bytes"] > 0 and row["frames"] is None and row["std_urad"] is None
+
+
+def test_a_batch_row_has_the_single_log_figures(folder, serial_rows, capsys):
+    """`analyze LOG --json` and the batch compute a log's figures with one code path."""
+    _, rows = serial_rows
+    row = next(r for r in rows if "relative_design2" in r["log"])
+    assert main(["analyze", row["path"], "--json", *SENSOR]) == 0
+    single = json.loads(capsys.readouterr().out)[0]
+    assert {k: v for k, v in single.items() if k != "test_name"} == \
+        {k: row[k] for k in single if k != "test_name"}
+
+
+def test_cli_writes_parquet_and_csv_that_read_back(folder, serial_rows, tmp_path, capsys):
+    _, rows = serial_rows
+    out = tmp_path / "tables" / "all"
+    assert main(["analyze", str(folder), "--table", str(out), "--workers", "1", *SENSOR]) == 1   # 2 bad
+    captured = capsys.readouterr()
+    assert "5 logs, 3 analysed without error, 2 with errors" in captured.out
+    assert "5/5 logs" in captured.err
+    parquet, csv_file = table_paths(out)
+    expected = rows_frame(rows, TABLE_KEYS)
+    pd.testing.assert_frame_equal(read_table(parquet), expected, check_exact=True)
+    back = read_table(csv_file)
+    assert list(back.columns) == TABLE_KEYS and len(back) == len(rows)
+    assert list(back["path"]) == [r["path"] for r in rows]
+    assert back["std_urad"].tolist()[:2] == pytest.approx([r["std_urad"] for r in rows[:2]],
+                                                          rel=1e-15)
+    assert back["error"].isna().tolist() == [not r["error"] for r in rows]
+
+
+def test_cli_serial_with_a_suffix_writes_that_file_only(folder, serial_rows, tmp_path, capsys):
+    _, rows = serial_rows
+    out = tmp_path / "campaign.parquet"
+    assert main(["analyze", str(folder / "campaign"), "--serial", "--table", str(out), *SENSOR]) == 0
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["campaign.parquet"]
+    pd.testing.assert_frame_equal(read_table(out), rows_frame(rows[:2], TABLE_KEYS),
+                                  check_exact=True)
+    assert "2 logs, 2 analysed without error, 0 with errors" in capsys.readouterr().out
+
+
+def test_cli_refuses_single_log_options_in_a_batch(folder, capsys):
+    assert main(["analyze", str(folder), "--table", "x", "--plot", "p.png"]) == 2
+    assert "--plot is for single logs" in capsys.readouterr().err
+    assert main(["analyze", str(folder / "nothing-here.h5"), "--serial"]) == 1
+    assert "nothing-here.h5: error: " in capsys.readouterr().out
+    assert main(["analyze", str(folder / "campaign/*.txt"), "--serial"]) == 2
+    assert "no .h5 logs in" in capsys.readouterr().err
+    with pytest.raises(SystemExit):
+        main(["analyze", str(folder), "--scheduler", "somewhere"])
+
+
+def test_a_moved_campaign_folder_keeps_its_identity(folder, tmp_path):
+    """The report names where the logs were written; matched by name in its folder."""
+    moved = tmp_path / "moved"
+    shutil.copytree(folder / "campaign", moved)
+    paths = find_logs([moved])
+    row = analyze_one(paths[1], BatchOptions(metrics=("jitter",), sensor="encoder_inner"), campaign_index(paths)[str(paths[1])])
+    assert (row["campaign"], row["campaign_run"], row["design"]) == ("batch_test", 2,
+                                                                     "relative_design2")
