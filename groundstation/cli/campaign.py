@@ -26,6 +26,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..core.kinds import GeneratorChoice
 from ..core.errors import GroundStationError
 
 EXIT_OK, EXIT_FAILED, EXIT_MALFORMED = 0, 1, 2
@@ -233,7 +234,7 @@ def _cmd_run(args) -> int:
              "log_folder": str(folder)}
     operator = (lambda prompt: input(f"{prompt} - continue? [y/N] ").strip().lower() == "y") \
         if sys.stdin.isatty() else None
-    generator = None if args.generator == "none" else args.generator
+    generator = None if args.generator == GeneratorChoice.NONE else args.generator
     t0 = time.monotonic()
     report = None
     interrupted = False

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..core.kinds import LinkState
 from ..core.errors import GroundStationError
 
 
@@ -193,7 +194,7 @@ def _cmd_replay(args) -> int:
                 print(f"t={src.position:9.3f} s | {format_snapshot(src.stats.snapshot())}", flush=True)
         except KeyboardInterrupt:
             src.pause()
-        if src.link_state == "lost" and isinstance(src.error, GroundStationError):
+        if src.link_state == LinkState.LOST and isinstance(src.error, GroundStationError):
             raise src.error              # a damaged log: main() prints the one-line reason
         snap = src.stats.snapshot()
         end = "-" if src.position is None else f"{src.position:.3f}"

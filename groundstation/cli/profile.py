@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from ..core.kinds import ProfileOrigin
 from .station import add_device_options, fail, print_progress
 from ..core.errors import GroundStationError
 
@@ -189,7 +190,7 @@ def _cmd_play(args) -> int:
             assert rec is not None
             print(f"loaded: profile {rec.profile_id} crc {rec.crc:08x}, {rec.sample_count} "
                   f"samples in {rec.upload_s:.2f} s"
-                  + (f", offset {rec.offset:.9g} rad" if rec.origin == "relative" else ""))
+                  + (f", offset {rec.offset:.9g} rad" if rec.origin == ProfileOrigin.RELATIVE else ""))
             print(result.text())
             if not result.completed:
                 return fail(f"{profile.name}: playback {result.reason}; " + _safety(players[0]))

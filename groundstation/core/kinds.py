@@ -55,3 +55,18 @@ class GeneratorChoice(StrEnum):
 
 #: the device word that starts the simulated testbed (anything else is an address)
 SIMULATED_DEVICE = "sim"
+
+
+class ProfileOrigin(StrEnum):
+    """What a command profile's samples are measured from (profile files' `origin`)."""
+
+    ABSOLUTE = "absolute"         # the target itself
+    RELATIVE = "relative"         # offsets from the position held when the profile starts
+
+
+class SimPacing(StrEnum):
+    """How the simulated device's control periods are paced (sim/device.py)."""
+
+    REALTIME = "realtime"         # 1200 periods per wall second (times `speed`)
+    FAST = "fast"                 # as fast as possible, frames to a consumer
+    MANUAL = "manual"             # stepped by a script's clock (the fast simulated testbed)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import sys
 import time
+from ..core.kinds import LinkState
 
 EXIT_OK, EXIT_FAILED, EXIT_REFUSED = 0, 1, 2
 
@@ -51,7 +52,7 @@ def status_line(viewer) -> str:
     extra = "".join(f" | {label} {n} msg" for label, n in (
         ("missed", c.missed_messages), ("bad", c.bad_messages),
         ("resync", c.message_resyncs)) if n)
-    if viewer.link_state == "up":
+    if viewer.link_state == LinkState.UP:
         commander = (f"commander: {viewer.hello.get('link_state', '?')}, "
                      f"drop={viewer.hello.get('dropped', '?')}")
     else:
@@ -85,7 +86,7 @@ def _ending(viewer) -> str:
     notes = [f"{c.bad_messages} message(s) refused"] if c.bad_messages else []
     if c.message_resyncs:
         notes.append(f"{c.message_resyncs} resynchronisation(s) of the message sequence")
-    if viewer.link_state not in ("up", "closed"):
+    if viewer.link_state not in (LinkState.UP, LinkState.CLOSED):
         notes.append(f"the watch was {viewer.link_state}: {viewer.link_error}")
     return "; ".join(notes)
 

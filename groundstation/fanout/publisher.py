@@ -27,6 +27,7 @@ import time
 from dataclasses import asdict
 from typing import Any, Callable
 
+from ..core.kinds import SIMULATED_DEVICE
 from . import wire
 from .endpoints import FanoutError, check_bind
 
@@ -43,7 +44,7 @@ def device_description(client, address: str = "") -> dict[str, Any]:
     """The device as a viewer needs it for ABORT: kind (tcp or serial), host and port."""
     from ..link.address import parse_address
 
-    if address and address != "sim":
+    if address and address != SIMULATED_DEVICE:
         try:
             addr = parse_address(address)
         except Exception:           # a name only the commander understands: use the peer

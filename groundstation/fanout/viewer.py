@@ -33,6 +33,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from ..core.kinds import LinkState
 from ..codec import DatagramDecoder, FrameCodec
 from ..link.client import CommandResult, StageRecord
 from ..link.intake import TelemetryIntake
@@ -89,7 +90,7 @@ class WatchClient:
         self.counters = FanoutCounters()
         for source in (self._decoder.counters, self.intake.counters, self.counters):
             self.stats.add_framing_source(source)
-        self.link_state = "closed"
+        self.link_state = LinkState.CLOSED
         self.link_error = ""
         #: the publisher's newest hello (device, protocol, the commander's link health)
         self.hello: dict[str, Any] = {}
@@ -179,7 +180,7 @@ class WatchClient:
             sock.close(linger=0)
             ctx.term()
             raise
-        self._set_state("connecting", self.endpoint)
+        self._set_state(LinkState.CONNECTING, self.endpoint)
         self._thread = threading.Thread(target=self._read, args=(ctx, sock),
                                         name="gs-fanout-viewer", daemon=True)
         self._thread.start()
@@ -229,9 +230,9 @@ class WatchClient:
 
     def _watchdog(self) -> None:
         """'lost' when nothing valid arrived for silence_s (whatever else did)."""
-        if self.link_state == "up" and time.monotonic() - self._last_valid > self.silence_s:
+        if self.link_state == LinkState.UP and time.monotonic() - self._last_valid > self.silence_s:
             bad = f" ({self._bad_in_a_row} refused meanwhile)" if self._bad_in_a_row else ""
-            self._set_state("lost", f"nothing valid from the publisher at {self.endpoint} for "
+            self._set_state(LinkState.LOST, f"nothing valid from the publisher at {self.endpoint} for "
                                     f"{self.silence_s:g} s{bad} - still listening")
 
     def _fail(self, exc: BaseException) -> None:
@@ -239,7 +240,7 @@ class WatchClient:
         self.failure = f"the reader stopped on {type(exc).__name__}: {str(exc)[:200]}"
         log.error("watching %s: %s", self.endpoint, self.failure)
         log.debug("watching %s: the reader's error", self.endpoint, exc_info=True)
-        self._set_state("failed", f"{self.failure} - this console no longer watches "
+        self._set_state(LinkState.FAILED, f"{self.failure} - this console no longer watches "
                                   f"{self.endpoint}; start it again")
 
     def _bad(self, reason: str) -> None:
@@ -247,8 +248,8 @@ class WatchClient:
         self.counters.bad_messages += 1
         self.counters.recent_errors.append(FanoutError(f"refused a message: {reason}"))
         self._bad_in_a_row += 1
-        if self._bad_in_a_row == BAD_IN_A_ROW and self.link_state in ("up", "connecting"):
-            self._set_state("lost", f"{BAD_IN_A_ROW} messages in a row from {self.endpoint} "
+        if self._bad_in_a_row == BAD_IN_A_ROW and self.link_state in (LinkState.UP, LinkState.CONNECTING):
+            self._set_state(LinkState.LOST, f"{BAD_IN_A_ROW} messages in a row from {self.endpoint} "
                                     f"that this console refused (the last: {reason}) - is "
                                     f"another program bound there? still listening")
 
@@ -280,8 +281,8 @@ class WatchClient:
         self.counters.messages += 1
         self._bad_in_a_row = 0
         self._last_valid = time.monotonic()
-        if self.link_state != "up":
-            self._set_state("up", self.endpoint)
+        if self.link_state != LinkState.UP:
+            self._set_state(LinkState.UP, self.endpoint)
 
     def _sequence(self, seq: int) -> None:
         """Missed messages from the gaps of the message sequence, within reason."""
@@ -359,8 +360,8 @@ class WatchClient:
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
-        if self.link_state != "closed":
-            self._set_state("closed", "")
+        if self.link_state != LinkState.CLOSED:
+            self._set_state(LinkState.CLOSED, "")
 
     def __enter__(self) -> "WatchClient":
         return self.start()

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any, Callable, Iterable
 
+from ..core.kinds import LinkState
 from ..codec import DatagramDecoder, FrameCodec, StreamDeframer, TelemetryBlock
 from ..codec.frames import decode_items, encode_items
 from ..core.dictionary import Dictionary
@@ -111,7 +112,7 @@ class DeviceClient:
         self._drained = threading.Event()
         self.session_token: int | None = None
         self.device_info: dict[str, Any] = {}
-        self.link_state = "closed"
+        self.link_state = LinkState.CLOSED
         self.link_error: str = ""
         #: how long the telemetry reader lets datagrams gather after waking (UdpReceiver.receive):
         #: 10 ms batches a 1200 Hz stream 12 frames at a time, at no cost in latency
@@ -196,7 +197,7 @@ class DeviceClient:
         """Start the reader threads (no I/O before this)."""
         if self._threads:
             return
-        self._set_state("up", "")
+        self._set_state(LinkState.UP, "")
         self._threads.append(threading.Thread(target=self._read_stream, name="gs-cmd-reader",
                                               daemon=True))
         if self.telemetry is not None:
@@ -271,7 +272,7 @@ class DeviceClient:
             p.error = LinkLostError(message)
             p.answered.set()
             p.finished.set()
-        self._set_state("lost", message)
+        self._set_state(LinkState.LOST, message)
 
     # ------------------------------------------------------------------ commands
     def _on_responses(self, block: TelemetryBlock) -> None:
@@ -353,7 +354,7 @@ class DeviceClient:
             raise NotConnectedError(f"{name}: no session - connect first")
         # after the device ended our session the link still carries the commands anyone
         # may send (ABORT, GET_INFO, CONNECT to take the session back)
-        usable = self.link_state == "up" or (self.link_state == "ended" and not cmd.needs_session)
+        usable = self.link_state == LinkState.UP or (self.link_state == LinkState.ENDED and not cmd.needs_session)
         if not usable:
             raise LinkLostError(f"{name}: link is {self.link_state}"
                                 + (f" ({self.link_error})" if self.link_error else ""))
@@ -465,7 +466,7 @@ class DeviceClient:
     def _patient(self, since: float) -> bool:
         """Wait longer than the dictionary says for an answer: the device runs on this
         machine, is still there, and has not yet been silent for LOCAL_DEVICE_PATIENCE_S."""
-        if self.device_gone is None or self.link_state not in ("up", "ended"):
+        if self.device_gone is None or self.link_state not in (LinkState.UP, LinkState.ENDED):
             return False
         return not self.device_gone() and time.monotonic() - since < LOCAL_DEVICE_PATIENCE_S
 
@@ -488,9 +489,9 @@ class DeviceClient:
                    f"take-over to take it back")
         self.session_token = None
         self._session_stop.set()
-        if self.link_state == "up":
+        if self.link_state == LinkState.UP:
             log.error("%s", message)
-            self._set_state("ended", message)
+            self._set_state(LinkState.ENDED, message)
         return SessionEndedError(f"{name}: {message}", "NOT_SESSION_OWNER", data)
 
     def _rejection(self, name: str, seq: int, reason: str, data: bytes) -> CommandRejected:
@@ -548,7 +549,7 @@ class DeviceClient:
             except GroundStationError as exc:
                 self.heartbeat_failures += 1
                 log.warning("heartbeat failed (%d in a row): %s", self.heartbeat_failures, exc)
-                if self.link_state != "up":
+                if self.link_state != LinkState.UP:
                     return
 
     def disconnect(self) -> None:
@@ -557,7 +558,7 @@ class DeviceClient:
         if self._heartbeat_thread is not None:
             self._heartbeat_thread.join(timeout=2.0)
             self._heartbeat_thread = None
-        if self.session_token is not None and self.link_state == "up":
+        if self.session_token is not None and self.link_state == LinkState.UP:
             try:
                 self.command("DISCONNECT")
             finally:
@@ -571,12 +572,12 @@ class DeviceClient:
     def close(self) -> None:
         """Disconnect if needed and stop all threads; safe to call twice."""
         try:
-            if self.session_token is not None and self.link_state == "up":
+            if self.session_token is not None and self.link_state == LinkState.UP:
                 self.disconnect()
         except GroundStationError as exc:
             log.warning("disconnect on close failed: %s", exc)
         self._session_stop.set()
-        if self.telemetry is not None and self._threads and self.link_state == "up":
+        if self.telemetry is not None and self._threads and self.link_state == LinkState.UP:
             # the device stopped its telemetry at DISCONNECT; what it sent before is still
             # in the socket: let the reader hand it on before the socket closes
             self._draining.set()
@@ -588,8 +589,8 @@ class DeviceClient:
         for t in self._threads:
             t.join(timeout=2.0)
         self._threads.clear()
-        if self.link_state not in ("lost", "ended"):     # keep the reason it ended
-            self._set_state("closed", "")
+        if self.link_state not in (LinkState.LOST, LinkState.ENDED):     # keep the reason it ended
+            self._set_state(LinkState.CLOSED, "")
 
     def __enter__(self) -> "DeviceClient":
         return self

@@ -31,6 +31,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..core.kinds import LinkState
 from ..codec import TelemetryBlock
 from ..core.dictionary import Dictionary
 from ..core.errors import GroundStationError
@@ -85,7 +86,7 @@ class ReplaySource:
         self.attrs = self._reader.attrs
         self.main_packet = self._reader.main_track.pkt.name
         self.stats = LinkStatistics(self.dictionary.control_rate_hz)
-        self.link_state = "up"
+        self.link_state = LinkState.UP
         self.link_error = ""
         self.error: Exception | None = None     # what stopped the replay ('lost'), if anything
         self.subscriber_errors = 0
@@ -244,7 +245,7 @@ class ReplaySource:
             self._cv.notify_all()
         if threading.current_thread() is not self._thread:
             self._thread.join(timeout=5.0)
-        self.link_state = "closed"
+        self.link_state = LinkState.CLOSED
         self._notify("closed", "")
 
     def __enter__(self) -> "ReplaySource":
@@ -268,7 +269,7 @@ class ReplaySource:
                 msg = f"replay of {self.path.name} stopped: {type(exc).__name__}: {exc}"
                 log.exception(msg)
             self.link_error = msg
-            self.link_state = "lost"
+            self.link_state = LinkState.LOST
             with self._cv:
                 self._idle = True
                 self._ops.clear()

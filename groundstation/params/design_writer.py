@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.kinds import Setup
 from .design_file import ControllerDesign, load_design
 from .discretise import _singular_text, singular_factors
 from .tf_algebra import (CANCEL_TOLERANCE, CONTROL_RATE_HZ, DesignError, TransferFunction,
@@ -193,7 +194,7 @@ def design_text(design: ControllerDesign, path: str | Path, *, name: str | None 
     if fc.slope_table is not None:
         lines.append(f"slope_table = {_string(_relative(fc.slope_table, folder))}")
     lines.append("")
-    unit = "in-oz/(rad/s)" if design.mode == "inertial" else "in-oz/rad"
+    unit = "in-oz/(rad/s)" if design.mode == Setup.INERTIAL else "in-oz/rad"
     if c0_equivalent_to is not None:
         lines += [f"# c0 = {design.c0.text()}   {unit}",
                   "# (output-equivalent: recomputed from that design when this file is read)",

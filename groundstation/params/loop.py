@@ -19,6 +19,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..core.kinds import Setup
 from ..core.dictionary import Dictionary, load_dictionary
 from . import table as ptable
 from .tf_algebra import CONTROL_RATE_HZ
@@ -113,7 +114,7 @@ def validate(design: ControllerDesign, values: Mapping[str, Any] | None = None,
         problems.append(_instability_text(report.unstable_poles, lm.loop.rate_hz, design))
     nyquist = lm.loop.rate_hz / 2
     report.margins = margins(lambda f: lm.response(f, "error"), nyquist)
-    if design.mode == "inertial":
+    if design.mode == Setup.INERTIAL:
         report.inner_margins = margins(lambda f: lm.response(f, "inner"), nyquist)
         report.outer_margins = margins(lambda f: lm.response(f, "outer"), nyquist)
     if not report.unstable_poles:
@@ -200,7 +201,7 @@ def _instability_text(poles: list[complex], rate_hz: float, design) -> str:
     p = max(poles, key=abs)
     head = f"the closed loop is unstable: {len(poles)} pole(s) on or outside the unit circle"
     if abs(p - 1) < 1e-6:
-        hint = ("outer_loop_gain = 0 leaves the LOS angle free" if design.mode == "inertial"
+        hint = ("outer_loop_gain = 0 leaves the LOS angle free" if design.mode == Setup.INERTIAL
                 else "is the controller's gain zero?")
         return (f"{head}, the largest at z = 1 (0 Hz): an integrator the feedback does not "
                 f"act on (the axis' free rotation or a controller integrator); {hint}")

@@ -32,6 +32,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from ..core.kinds import Setup
 from ..core.dictionary import Dictionary, load_dictionary
 from ..plant import model as plant_model
 from .tf_algebra import CONTROL_RATE_HZ
@@ -239,7 +240,7 @@ class SampledLoop:
         M = z[:, None, None] * np.eye(n) - self.Ad
         X = np.linalg.solve(M, np.broadcast_to(self.Bd, (len(z), n, 2)))
         out = {"angle": np.einsum("i,fij->fj", self.c_angle, X)}
-        if self.mode == "inertial":
+        if self.mode == Setup.INERTIAL:
             w = np.einsum("i,fij->fj", self.gyro_state, X) + self.gyro_input
             gyro = w * z[:, None] ** (-self.gyro_delay_samples)
             a, T = self.alpha, self.period
@@ -255,7 +256,7 @@ class SampledLoop:
 
     def error_feedback_from(self, m: Mapping[str, np.ndarray], loop: str = "error") -> np.ndarray:
         """error_feedback from measurements(z) already computed."""
-        if self.mode == "relative":
+        if self.mode == Setup.RELATIVE:
             return m["angle"]
         kp = self.outer_loop_gain if loop == "error" else 0.0
         return kp * m["estimate"] + m["gyro"]
@@ -268,7 +269,7 @@ class SampledLoop:
         """(M, m): X_(k+1) = M X_k + m r_k, X = [plant, gyro delay line, complementary
         filter, controller states]; the plant's states come first."""
         n = self.Ad.shape[0]
-        inertial = self.mode == "inertial"
+        inertial = self.mode == Setup.INERTIAL
         nq = self.gyro_delay_samples if inertial else 0
         nh = 1 if inertial else 0
         Ac, Bc, Cc, Dc = _controller(c0, c1, c2)
@@ -336,7 +337,7 @@ def sampled_loop(testbed, mode: str, rate_hz: float = CONTROL_RATE_HZ,
     """The ZOH-discretised plant of a testbed, with the sensors the mode feeds back."""
     M = plant_model
     states = [M.TH1, M.W1] + ([M.TH2, M.W2] if testbed.is_2dof else [])
-    if mode == "inertial":
+    if mode == Setup.INERTIAL:
         states += [M.GY, M.GYD]
     A, B = M.continuous_model(testbed)
     A, B = A[np.ix_(states, states)], B[np.ix_(states, [0, 1])]
@@ -344,7 +345,7 @@ def sampled_loop(testbed, mode: str, rate_hz: float = CONTROL_RATE_HZ,
     Ad, Bd = M.discretise(A, B, T)
     c_angle = np.zeros(len(states))
     c_angle[states.index(M.TH2 if testbed.is_2dof else M.TH1)] = 1.0
-    if mode == "relative":
+    if mode == Setup.RELATIVE:
         return SampledLoop(mode, rate_hz, Ad, Bd, c_angle)
     steps = testbed.sensors["gyro_delay"] * rate_hz
     whole = int(math.floor(steps + 1e-9))
@@ -395,9 +396,9 @@ class LoopModel:
         loop alone, K_p = 0) or "outer" (inertial: broken at the angle error, rate loop
         closed)."""
         z = np.exp(2j * np.pi * np.asarray(freqs_hz, dtype=float) / self.loop.rate_hz)
-        if loop == "inner" and self.loop.mode != "inertial":
+        if loop == "inner" and self.loop.mode != Setup.INERTIAL:
             raise ValueError("the inner loop exists in inertial mode only")
-        if loop not in ("error", "inner") and (loop != "outer" or self.loop.mode != "inertial"):
+        if loop not in ("error", "inner") and (loop != "outer" or self.loop.mode != Setup.INERTIAL):
             raise ValueError(f"unknown loop {loop!r} for {self.loop.mode} mode")
         m, C = self._parts(z)
         if loop in ("error", "inner"):

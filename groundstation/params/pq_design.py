@@ -29,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.kinds import Setup
 from .design_file import ControllerDesign
 from .pq import LoopFunctions, alignment_deg, loop_functions, pq_alignment_deg
 from .tf_algebra import CONTROL_RATE_HZ, INTEGRATOR_TOLERANCE, DesignError, TransferFunction
@@ -71,7 +72,7 @@ def plant_row(testbed, s: np.ndarray, mode: str, sensor: bool = True) -> np.ndar
     s = np.asarray(s, complex)
     d = np.polyval(den, s)
     G = np.stack([np.polyval(n1, s) / d, np.polyval(n2, s) / d], axis=-1)
-    if mode == "inertial":
+    if mode == Setup.INERTIAL:
         factor = s * (gyro_response(testbed, s) if sensor else 1.0)
         G = G * factor[:, None]
     return G
@@ -215,7 +216,7 @@ def dc_input_sensitivity(design: ControllerDesign) -> DCMatrix:
     The gyro's dynamics and delay are 1 at s = 0 and do not enter; the inertial rate
     output adds one power of s to both g1 and g2."""
     (n1, den), (n2, _) = _plant_polynomials(design.testbed)
-    extra = 1 if design.mode == "inertial" else 0
+    extra = 1 if design.mode == Setup.INERTIAL else 0
     g = [leading_of_polynomials(n, den) for n in (n1, n2)]
     g = [Leading(t.coef, t.order + extra) for t in g]
     c0 = leading_of_tf(design.c0)

@@ -16,6 +16,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..core.kinds import Setup
 from .design_file import ControllerDesign
 from .pq_design import (DCMatrix, PQAnalysis, analyze, dc_input_sensitivity, frequency_grid,
                         ratio_alignment_deg)
@@ -96,8 +97,8 @@ def summarize(design: ControllerDesign, freqs_hz=DEFAULT_FREQS_HZ,
 
 def _design_lines(s: DesignSummary) -> list[str]:
     d, v = s.design, s.validation
-    plant = ("LOS rate seen through the gyro (second order, exact delay)" if d.mode == "inertial"
-             and s.analysis.sensor else "LOS rate" if d.mode == "inertial" else "LOS angle")
+    plant = ("LOS rate seen through the gyro (second order, exact delay)" if d.mode == Setup.INERTIAL
+             and s.analysis.sensor else "LOS rate" if d.mode == Setup.INERTIAL else "LOS angle")
     out = [f"design:   {d.name} ({d.path.name})",
            f"mode:     {d.mode} on {d.testbed.name}; G = [g1, g2] of the {plant}"]
     if v.margins is not None:

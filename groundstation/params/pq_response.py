@@ -21,6 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..core.kinds import Setup
 from .design_file import ControllerDesign
 
 INPUTS = ("d1", "d2")
@@ -116,7 +117,7 @@ def loop_system(design: ControllerDesign, lm=None, dictionary=None) -> LoopSyste
     B = np.zeros((N, 3))
     B[:, 0] = m
     B[:n, 1:] = loop.Bd
-    if loop.mode == "inertial":
+    if loop.mode == Setup.INERTIAL:
         B[n, 1:] = loop.gyro_input          # the gyro's first delay state sees u + d too
     C = np.zeros((3, N))
     C[0, :n] = loop.c_angle

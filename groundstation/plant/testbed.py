@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..core.kinds import Setup
 from ..core.errors import GroundStationError
 from ..core.tomlfile import read_toml
 
@@ -117,7 +118,7 @@ class Testbed:
 
     @property
     def inertial(self) -> bool:
-        return self.setup == "inertial"
+        return self.setup == Setup.INERTIAL
 
 
 def _check(value: Any, spec: tuple, where: str) -> Any:
@@ -170,7 +171,7 @@ def load_testbed(path: str | Path | None = None) -> Testbed:
     tb = _section(doc, "testbed", SCHEMA["testbed"], path)
     if tb["configuration"] not in ("1dof", "2dof"):
         raise TestbedConfigError(f"{path}: testbed.configuration must be \"1dof\" or \"2dof\"")
-    if tb["setup"] not in ("relative", "inertial"):
+    if tb["setup"] not in set(Setup):
         raise TestbedConfigError(f"{path}: testbed.setup must be \"relative\" or \"inertial\"")
     mech = _section(doc, "mechanics", _MECH_2DOF if tb["configuration"] == "2dof" else _MECH_1DOF, path)
     if tb["configuration"] == "2dof" and mech["flexure_safe_deflection"] >= mech["flexure_yield_deflection"]:
@@ -185,14 +186,14 @@ def load_testbed(path: str | Path | None = None) -> Testbed:
     if isinstance(raw_base, dict) and raw_base.get("enabled") is False:
         base_schema = {"enabled": base_schema["enabled"]}
     base = _section(doc, "base_stage", base_schema, path)
-    if tb["setup"] == "relative" and base["enabled"]:
+    if tb["setup"] == Setup.RELATIVE and base["enabled"]:
         raise TestbedConfigError(f"{path}: base_stage.enabled must be false in the relative "
                                  f"setup (the base is fixed to the optical table)")
     assumed = doc.get("assumed", {}).get("values", [])
     if not isinstance(assumed, list) or not all(isinstance(a, str) for a in assumed):
         raise TestbedConfigError(f"{path}: [assumed] values must be a list of 'section.key' names")
     testbed = Testbed(
-        path=path.resolve(), name=tb["name"], configuration=tb["configuration"], setup=tb["setup"],
+        path=path.resolve(), name=tb["name"], configuration=tb["configuration"], setup=Setup(tb["setup"]),
         description=tb["description"], mechanics=mech, friction=fric,
         motor_coarse=_section(doc, "motor_coarse", SCHEMA["motor_coarse"], path),
         motor_fine=_section(doc, "motor_fine", SCHEMA["motor_fine"], path),

@@ -7,6 +7,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..core.kinds import ProfileOrigin
 from ..core.dictionary import Dictionary
 from .samples import DEFAULT_GYRO_RANGE, Profile, ProfileRefused
 
@@ -81,10 +82,10 @@ def check_profile(profile: Profile, dictionary: Dictionary | None = None, *, off
         return check
     lo, hi = sample_range(dictionary, profile.target, gyro_range)
     if not _in_range(dictionary, profile.target, x, gyro_range):
-        at = "" if profile.origin == "absolute" or not offset else f" (offset {offset:.6g} {profile.units})"
+        at = "" if profile.origin == ProfileOrigin.ABSOLUTE or not offset else f" (offset {offset:.6g} {profile.units})"
         p.append(f"samples span {float(x.min()):.6g} … {float(x.max()):.6g} {profile.units}{at}, "
                  f"outside the {profile.target} range {lo:g} … {hi:g} {profile.units}")
-    rest = np.float32(offset) if profile.origin == "relative" else np.float32(0.0)
+    rest = np.float32(offset) if profile.origin == ProfileOrigin.RELATIVE else np.float32(0.0)
     if x[0] != rest:
         p.append(f"the first sample is {float(x[0]):.6g} {profile.units}, not the rest value "
                  f"{float(rest):g}: the device would jump to it - add a ramp in (ramp_s) or start "

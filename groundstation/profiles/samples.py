@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from ..core.kinds import ProfileOrigin
 from ..core.errors import GroundStationError
 from . import waveforms as gen
 
@@ -86,7 +87,7 @@ class Profile:
         if self.target not in TARGETS:
             raise ProfileError(f"profile {self.name!r}: unknown target {self.target!r} "
                                f"(known: {', '.join(TARGETS)})")
-        if self.origin not in ("absolute", "relative"):
+        if self.origin not in set(ProfileOrigin):
             raise ProfileError(f"profile {self.name!r}: origin must be 'absolute' or 'relative'")
         self.samples = np.ascontiguousarray(self.samples, dtype=np.float32)
         if self.samples.ndim != 1:
@@ -108,7 +109,7 @@ class Profile:
     def wire_samples(self, offset: float = 0.0) -> np.ndarray:
         """The float32 samples as the device will play them: + offset for a relative profile
         (added in double precision, then rounded once to f32)."""
-        if self.origin == "relative" and offset:
+        if self.origin == ProfileOrigin.RELATIVE and offset:
             return (self.samples.astype(np.float64) + offset).astype(np.float32)
         return self.samples
 

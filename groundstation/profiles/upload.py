@@ -32,6 +32,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..core.kinds import LinkState, ProfileOrigin
 from ..core.dictionary import Dictionary
 from ..core.errors import CommandFailed, CommandRejected, GroundStationError, LinkLostError
 from .samples import DEFAULT_GYRO_RANGE, TARGETS, Profile
@@ -321,7 +322,7 @@ class ProfileLoader:
                     f"(expected active_profile {pid}) - is telemetry arriving?")
         record = ProfileRecord(
             time=time.time(), name=profile.name, target=profile.target, units=profile.units,
-            origin=profile.origin, offset=float(offset) if profile.origin == "relative" else 0.0,
+            origin=profile.origin, offset=float(offset) if profile.origin == ProfileOrigin.RELATIVE else 0.0,
             profile_id=pid, crc=crc, sample_count=count, duration_s=profile.duration,
             source=profile.source, description=profile.description,
             generator=dict(profile.generator), committed_tick=int(committed),
@@ -422,7 +423,7 @@ class ProfilePlayer:
                 progress(m.max_index, count)
             if ended or time.monotonic() >= deadline:
                 break
-            if getattr(self.client, "link_state", "up") != "up":
+            if getattr(self.client, "link_state", "up") != LinkState.UP:
                 raise LinkLostError(f"link {self.client.link_state} during playback: the "
                                     f"device's watchdog will stop the motors")
         if ended and m.max_index < count:
@@ -479,7 +480,7 @@ class ProfilePlayer:
                                  f"{' or '.join(info.modes)}, not {mode}")
         check_profile(profile, self.d, gyro_range=self.loader.gyro_range).raise_if_refused()
         say = on_step or (lambda text: None)
-        relative = profile.origin == "relative"
+        relative = profile.origin == ProfileOrigin.RELATIVE
         try:
             if not relative:
                 say("uploading")

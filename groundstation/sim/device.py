@@ -18,6 +18,7 @@ from typing import Any, Callable, Iterable
 
 import numpy as np
 
+from ..core.kinds import SimPacing
 from ..codec import FrameCodec, StreamDeframer
 from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import LinkLostError, PortInUseError
@@ -114,7 +115,7 @@ class SimulatedDevice:
                  tcp_port: int = 0, pacing: str = "realtime", seed: int = 0,
                  frames_per_datagram: int = 1, firmware: Firmware | None = None,
                  testbed: Testbed | None = None, speed: float = 1.0):
-        if pacing not in ("realtime", "fast", "manual"):
+        if pacing not in (SimPacing.REALTIME, SimPacing.FAST, SimPacing.MANUAL):
             raise ValueError(f"pacing must be realtime, fast or manual, not {pacing!r}")
         if not speed > 0 or speed == float("inf"):
             raise ValueError(f"speed must be a finite number > 0, not {speed!r}")
@@ -185,7 +186,7 @@ class SimulatedDevice:
         self._listener = lst
         self.tcp_port = port
         self._spawn(self._accept_loop, "sim-accept")
-        if self.pacing != "manual":
+        if self.pacing != SimPacing.MANUAL:
             self._spawn(self._tick_loop, "sim-ticks")
         log.info("simulated device listening on tcp://%s:%d", self.host, self.tcp_port)
         return self
@@ -268,7 +269,7 @@ class SimulatedDevice:
     def _on_commands(self, conn: _Connection, block) -> None:
         out = []
         with self._lock:
-            if self.pacing == "realtime" and self._t0 is not None:
+            if self.pacing == SimPacing.REALTIME and self._t0 is not None:
                 self._catch_up()          # execute at the control-cycle boundary of "now"
             confirm = housekeeping = False
             for i in range(len(block)):
@@ -282,7 +283,7 @@ class SimulatedDevice:
                 for st in stages:
                     out.append(self._response(seq, opcode, st))
             self._flush_events()
-            if confirm and self.pacing == "manual" and self.after_commands is not None:
+            if confirm and self.pacing == SimPacing.MANUAL and self.after_commands is not None:
                 self.after_commands(housekeeping)
         conn.send(b"".join(out))
 
@@ -528,7 +529,7 @@ class SimulatedDevice:
         self._t0 = time.monotonic()
         self._ticks_done = 0
         while not self._stop.is_set():
-            if self.pacing == "fast":
+            if self.pacing == SimPacing.FAST:
                 self.run_ticks(self.housekeeping_divider)    # one housekeeping period
                 continue
             self._catch_up()

@@ -43,6 +43,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
+from ..core.kinds import BetweenSteps, LinkState
 from ..core.errors import GroundStationError, LinkLostError
 
 #: device periods per chunk of a fast advance: 0.75 s, inside the 1 s watchdog even
@@ -101,7 +102,7 @@ class WallClock:
             now = time.monotonic()
             if self.abort.is_set():
                 raise ScriptAborted("aborted")
-            if self.client.link_state != "up":
+            if self.client.link_state != LinkState.UP:
                 raise LinkLostError(f"link {self.client.link_state}: {self.client.link_error}")
             if until is not None and until():
                 return
@@ -128,7 +129,7 @@ class SteppedClock:
     def __init__(self, device, client, abort: threading.Event, *,
                  pacing: FastPacing | None = None, between_steps: str = "held",
                  recorder_backlog: Callable[[], float] | None = None):
-        if between_steps not in ("held", "realtime"):
+        if between_steps not in (BetweenSteps.HELD, BetweenSteps.REALTIME):
             raise ValueError(f"between_steps must be held or realtime, not {between_steps!r}")
         self.device = device
         self.client = client
@@ -155,7 +156,7 @@ class SteppedClock:
         #: wall seconds the clock spent waiting for credits (receiver, recorder): for the
         #: benchmark's profile
         self.waited_s = 0.0
-        if between_steps == "held":
+        if between_steps == BetweenSteps.HELD:
             device.hold_between_steps(self._ran, datagram_bytes=self.pacing.datagram_bytes)
         self._idle = threading.Thread(target=self._idle_loop, name="gs-sim-idle-clock", daemon=True)
         self._idle.start()
@@ -170,7 +171,7 @@ class SteppedClock:
     def _idle_loop(self) -> None:
         period = 0.01
         step = max(1, int(round(self.rate * period)))
-        held = self.between_steps == "held"
+        held = self.between_steps == BetweenSteps.HELD
         while not self._stop.is_set():
             if self._fast.is_set():
                 with self._lock:
@@ -261,7 +262,7 @@ class SteppedClock:
                 if self._last_tick != progress:
                     progress, deadline = self._last_tick, time.monotonic() + FLOW_TIMEOUT_S
                 left = deadline - time.monotonic()
-                if left <= 0 or self.client.link_state != "up":
+                if left <= 0 or self.client.link_state != LinkState.UP:
                     what = (f"tick {self._last_tick} received, "
                             f"{self._in_flight[-1] if self._in_flight else 'more'} sent"
                             f"{f', {self._requested} chunks not yet run' if self._requested else ''}"
@@ -281,7 +282,7 @@ class SteppedClock:
     def tick_over(self) -> None:
         """Held between steps: one control period, received (a recording that starts then
         opens with the device's state, as on a rig whose stream flows anyway)."""
-        if self.between_steps != "held":
+        if self.between_steps != BetweenSteps.HELD:
             return
         with self._lock:
             self._run(1, 1)
@@ -344,7 +345,7 @@ class SteppedClock:
         self._fast.clear()
         self._commanded.set()
         self._idle.join(timeout=15)
-        if self.between_steps == "held":
+        if self.between_steps == BetweenSteps.HELD:
             # a device process already gone holds nothing
             with contextlib.suppress(LinkLostError):
                 self.device.hold_between_steps(None)

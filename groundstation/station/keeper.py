@@ -15,7 +15,7 @@ from typing import Callable
 
 from ..core.dictionary import Dictionary
 from ..core.errors import GroundStationError
-from ..core.kinds import SIMULATED_DEVICE
+from ..core.kinds import LinkState, SIMULATED_DEVICE
 from ..link.client import DeviceClient
 from .rig import LocalSimulator, open_link, start_simulator
 
@@ -110,9 +110,9 @@ class LinkKeeper:
         client = self.client
         if client is None:
             return Ending(EXIT_FAILED, "no link")
-        if client.link_state == "up":
+        if client.link_state == LinkState.UP:
             return None
-        if client.link_state == "ended":             # another station took the session over
+        if client.link_state == LinkState.ENDED:             # another station took the session over
             self.say(f"error: {client.link_error}")
             return Ending(EXIT_TAKEN_OVER, client.link_error)
         lost = f"link {client.link_state}: {client.link_error}"
