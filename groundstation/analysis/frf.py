@@ -121,33 +121,19 @@ def _default_nperseg(n: int) -> int:
     return max(p, MIN_SEGMENT_SAMPLES)
 
 
-def h1_estimate(input, output, rate_hz: float, nperseg: int | None = None, *,
-                noverlap: int | None = None, window: str = "hann",
-                input_units: str = "", output_units: str = "") -> FrequencyResponse:
-    """H1 frequency response from ``input`` to ``output`` sampled at ``rate_hz``.
-
-    nperseg   samples per Welch segment (frequency resolution rate_hz/nperseg); default:
-              the largest power of two with at least 8 segments in the record.
-    noverlap  samples shared by neighbouring segments (default nperseg // 2).
-    window    scipy window name, the same for S_xx and S_xy.
-    Each segment's mean is removed (a current offset or an angle bias carries no dynamics).
-
-    Raises FrfError for: non-numeric or non-finite samples, different lengths, a record
-    shorter than two segments, a bad rate or segment length, and an input without
-    excitation (constant).  Bins where S_xx is zero (band-limited input) get nan.
-    """
-    x = _as_signal("input", input)
-    y = _as_signal("output", output)
-    if x.size != y.size:
-        raise FrfError(f"input and output must have the same length (same samples): "
-                       f"{x.size} vs {y.size}")
+def _checked_rate(rate_hz) -> float:
     try:
         fs = float(rate_hz)
     except (TypeError, ValueError):
         raise FrfError(f"rate_hz = {rate_hz!r}: must be a number > 0 (Hz)") from None
     if not (math.isfinite(fs) and fs > 0.0):
         raise FrfError(f"rate_hz = {rate_hz!r}: must be finite and > 0 (Hz)")
-    n = x.size
+    return fs
+
+
+def _checked_segments(n: int, nperseg, noverlap) -> tuple[int, int, int]:
+    """(nperseg, noverlap, number of Welch segments) for a record of `n` samples, with
+    the defaults filled in; raises FrfError if they cannot give a coherence."""
     if n < MIN_SEGMENTS * MIN_SEGMENT_SAMPLES:
         raise FrfError(f"record too short for a frequency response: {n} samples "
                        f"(need at least {MIN_SEGMENTS * MIN_SEGMENT_SAMPLES})")
@@ -172,6 +158,10 @@ def h1_estimate(input, output, rate_hz: float, nperseg: int | None = None, *,
                        f"(coherence from one segment is always 1); record at least "
                        f"{nperseg + (MIN_SEGMENTS - 1) * (nperseg - noverlap)} samples or "
                        f"use a shorter nperseg")
+    return nperseg, noverlap, segments
+
+
+def _require_excitation(x: np.ndarray) -> None:
     # "No excitation" is judged on the detrended input, as the spectra see it: a constant
     # current (or all zeros) has S_xx = 0 in every bin and H1 would be 0/0 everywhere.
     # The threshold is relative to the input's own size (round-off of a large offset).
@@ -180,6 +170,47 @@ def h1_estimate(input, output, rate_hz: float, nperseg: int | None = None, *,
     if float(np.max(np.abs(x_dev))) <= 1e-12 * scale:
         raise FrfError("input has no excitation (it is constant): a frequency response "
                        "needs a varying input, e.g. the random current of the sysid profiles")
+
+
+def _h1_and_coherence(sxx: np.ndarray, syy: np.ndarray, sxy: np.ndarray
+                      ) -> tuple[np.ndarray, np.ndarray]:
+    """H1 = S_xy/S_xx and the coherence from the spectra, NaN in bins without power."""
+    # Bins without input power (band-limited excitation) have no response: nan, not a
+    # division warning.  Relative threshold: leakage of a window leaves tiny non-zero S_xx.
+    floor = 1e-14 * float(np.max(sxx))
+    ok_x = sxx > floor
+    h = np.full(sxx.shape, np.nan + 1j * np.nan, dtype=complex)
+    h[ok_x] = sxy[ok_x] / sxx[ok_x]
+    ok_xy = ok_x & (syy > 1e-14 * max(float(np.max(syy)), np.finfo(float).tiny))
+    coh = np.full(sxx.shape, np.nan)
+    coh[ok_xy] = np.abs(sxy[ok_xy]) ** 2 / (sxx[ok_xy] * syy[ok_xy])
+    np.clip(coh, 0.0, 1.0, out=coh)     # round-off can put a perfect bin at 1 + 1e-16
+    return h, coh
+
+
+def h1_estimate(input, output, rate_hz: float, nperseg: int | None = None, *,
+                noverlap: int | None = None, window: str = "hann",
+                input_units: str = "", output_units: str = "") -> FrequencyResponse:
+    """H1 frequency response from ``input`` to ``output`` sampled at ``rate_hz``.
+
+    nperseg   samples per Welch segment (frequency resolution rate_hz/nperseg); default:
+              the largest power of two with at least 8 segments in the record.
+    noverlap  samples shared by neighbouring segments (default nperseg // 2).
+    window    scipy window name, the same for S_xx and S_xy.
+    Each segment's mean is removed (a current offset or an angle bias carries no dynamics).
+
+    Raises FrfError for: non-numeric or non-finite samples, different lengths, a record
+    shorter than two segments, a bad rate or segment length, and an input without
+    excitation (constant).  Bins where S_xx is zero (band-limited input) get nan.
+    """
+    x = _as_signal("input", input)
+    y = _as_signal("output", output)
+    if x.size != y.size:
+        raise FrfError(f"input and output must have the same length (same samples): "
+                       f"{x.size} vs {y.size}")
+    fs = _checked_rate(rate_hz)
+    nperseg, noverlap, segments = _checked_segments(x.size, nperseg, noverlap)
+    _require_excitation(x)
     kw = dict(fs=fs, window=window, nperseg=nperseg, noverlap=noverlap,
               detrend="constant", return_onesided=True, scaling="density")
     try:
@@ -188,16 +219,7 @@ def h1_estimate(input, output, rate_hz: float, nperseg: int | None = None, *,
         _, sxy = signal.csd(x, y, **kw)
     except ValueError as exc:           # e.g. an unknown window name
         raise FrfError(f"spectral estimate failed: {exc}") from None
-    # Bins without input power (band-limited excitation) have no response: nan, not a
-    # division warning.  Relative threshold: leakage of a window leaves tiny non-zero S_xx.
-    floor = 1e-14 * float(np.max(sxx))
-    ok_x = sxx > floor
-    h = np.full(f.shape, np.nan + 1j * np.nan, dtype=complex)
-    h[ok_x] = sxy[ok_x] / sxx[ok_x]
-    ok_xy = ok_x & (syy > 1e-14 * max(float(np.max(syy)), np.finfo(float).tiny))
-    coh = np.full(f.shape, np.nan)
-    coh[ok_xy] = np.abs(sxy[ok_xy]) ** 2 / (sxx[ok_xy] * syy[ok_xy])
-    np.clip(coh, 0.0, 1.0, out=coh)     # round-off can put a perfect bin at 1 + 1e-16
+    h, coh = _h1_and_coherence(sxx, syy, sxy)
     if output_units or input_units:
         units = f"{output_units or '1'}/{input_units or '1'}"
     else:

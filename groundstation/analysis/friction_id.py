@@ -395,6 +395,80 @@ def _fill(x: np.ndarray, f: np.ndarray) -> np.ndarray:
     return out
 
 
+def _checked_arguments(sigma_in_oz_per_rad, x_grid, window_halfwidth_x,
+                       plateau_slope_ratio) -> tuple[float, np.ndarray, float]:
+    """(sigma, x grid, window half-width) of identify_friction's arguments, checked."""
+    sigma = float(sigma_in_oz_per_rad)
+    if not (math.isfinite(sigma) and sigma > 0.0):
+        raise FrictionIdError(f"sigma_in_oz_per_rad = {sigma_in_oz_per_rad!r}: must be > 0")
+    grid = DEFAULT_X_GRID if x_grid is None else np.asarray(x_grid, dtype=np.float64)
+    if (grid.ndim != 1 or grid.size < 2 or not np.all(np.isfinite(grid))
+            or np.any(np.diff(grid) <= 0) or grid[0] != 0.0 or grid[-1] != 2.0):
+        raise FrictionIdError("x_grid must be strictly increasing from 0 to 2 (the branch "
+                              "coordinate's range)")
+    w = float(window_halfwidth_x)
+    if not 0.0 < w <= 0.5:
+        raise FrictionIdError(f"window_halfwidth_x = {window_halfwidth_x!r}: must be in (0, 0.5]")
+    if not 0.0 < float(plateau_slope_ratio) < 1.0:
+        raise FrictionIdError(f"plateau_slope_ratio = {plateau_slope_ratio!r}: must be in (0, 1)")
+    return sigma, grid, w
+
+
+def _coulomb_torque(loop: HysteresisLoop, coulomb_torque_in_oz: float | None,
+                    plateau_slope_ratio: float) -> tuple[float, bool]:
+    """(T_c, whether it was estimated from the loop): the one given, or half the median
+    running swing of the complete branches that reach a plateau."""
+    if coulomb_torque_in_oz is None:
+        plateau = [b for b in loop.branches
+                   if b.complete and b.turnaround_slope_in_oz_per_rad > 0.0
+                   and abs(b.late_slope_in_oz_per_rad)
+                   <= plateau_slope_ratio * b.turnaround_slope_in_oz_per_rad]
+        if not plateau:
+            raise FrictionIdError(
+                "no complete branch reaches the running torque (its late slope stays above "
+                f"{plateau_slope_ratio:g} × its turnaround slope), so T_c cannot be read off "
+                "the loop: record a larger triangle amplitude or give coulomb_torque_in_oz")
+        t_c = float(np.median([0.5 * b.running_swing_in_oz for b in plateau]))
+        estimated = True
+    else:
+        t_c = float(coulomb_torque_in_oz)
+        estimated = False
+    if not (math.isfinite(t_c) and t_c > 0.0):
+        raise FrictionIdError(f"Coulomb torque T_c = {t_c!r} in-oz: must be > 0")
+    return t_c, estimated
+
+
+def _branch_slopes(loop: HysteresisLoop, b: Branch, grid: np.ndarray, w: float,
+                   t_c: float) -> np.ndarray:
+    """dT/dθ of one branch at each grid point (NaN where the branch gives none)."""
+    th, tq = loop.angle_rad, loop.torque_in_oz
+    slopes = np.full(grid.size, np.nan)
+    s = b.direction
+    psi = s * (th[b.start:b.stop + 1] - b.reversal_angle_rad)
+    dT = s * (tq[b.start:b.stop + 1] - b.reversal_torque_in_oz)
+    x_mono = np.maximum.accumulate(_moving_average(dT / t_c, SMOOTH_HALF_WIDTH))
+    for i, xg in enumerate(grid):
+        # at the ends of [0, 2] the window is one-sided but keeps its full width 2w:
+        # the first samples of a branch carry the reversal's timing jitter (the noisy
+        # angle's extremum is a few samples off), which a narrower fit would feel most
+        lo = min(max(xg - w, 0.0), 2.0 - 2.0 * w)
+        hi = max(min(xg + w, 2.0), 2.0 * w)
+        if x_mono[-1] < hi:
+            continue                           # the branch does not get through the window
+        a = 0 if lo <= 0.0 else int(np.searchsorted(x_mono, lo, side="left"))
+        e = int(np.searchsorted(x_mono, hi, side="right"))
+        if e - a < MIN_FIT_SAMPLES:
+            continue
+        g = min(int(np.searchsorted(x_mono, xg, side="left")), psi.size - 1)
+        p = psi[a:e] - psi[g]
+        scale = float(np.max(np.abs(p)))
+        if not scale > 0.0:
+            continue
+        coef = np.polynomial.polynomial.polyfit(p / scale, dT[a:e], 2)
+        slopes[i] = coef[1] / scale
+    return slopes
+
+
 def identify_friction(angle_rad, torque_in_oz, *, sigma_in_oz_per_rad: float,
                       coulomb_torque_in_oz: float | None = None, x_grid=None,
                       window_halfwidth_x: float = 0.01, monotone: bool = True,
@@ -413,67 +487,15 @@ def identify_friction(angle_rad, torque_in_oz, *, sigma_in_oz_per_rad: float,
                           ``monotone_violation`` for whether the data agreed.
     Other arguments: see split_branches.  Raises FrictionIdError.
     """
-    sigma = float(sigma_in_oz_per_rad)
-    if not (math.isfinite(sigma) and sigma > 0.0):
-        raise FrictionIdError(f"sigma_in_oz_per_rad = {sigma_in_oz_per_rad!r}: must be > 0")
-    grid = DEFAULT_X_GRID if x_grid is None else np.asarray(x_grid, dtype=np.float64)
-    if (grid.ndim != 1 or grid.size < 2 or not np.all(np.isfinite(grid))
-            or np.any(np.diff(grid) <= 0) or grid[0] != 0.0 or grid[-1] != 2.0):
-        raise FrictionIdError("x_grid must be strictly increasing from 0 to 2 (the branch "
-                              "coordinate's range)")
-    w = float(window_halfwidth_x)
-    if not 0.0 < w <= 0.5:
-        raise FrictionIdError(f"window_halfwidth_x = {window_halfwidth_x!r}: must be in (0, 0.5]")
-    if not 0.0 < float(plateau_slope_ratio) < 1.0:
-        raise FrictionIdError(f"plateau_slope_ratio = {plateau_slope_ratio!r}: must be in (0, 1)")
+    sigma, grid, w = _checked_arguments(sigma_in_oz_per_rad, x_grid, window_halfwidth_x,
+                                        plateau_slope_ratio)
     loop = split_branches(angle_rad, torque_in_oz, min_reversal_travel_rad=min_reversal_travel_rad,
                           turnaround_fraction=turnaround_fraction, late_fraction=late_fraction)
-    th, tq = loop.angle_rad, loop.torque_in_oz
-
-    if coulomb_torque_in_oz is None:
-        plateau = [b for b in loop.branches
-                   if b.complete and b.turnaround_slope_in_oz_per_rad > 0.0
-                   and abs(b.late_slope_in_oz_per_rad)
-                   <= plateau_slope_ratio * b.turnaround_slope_in_oz_per_rad]
-        if not plateau:
-            raise FrictionIdError(
-                "no complete branch reaches the running torque (its late slope stays above "
-                f"{plateau_slope_ratio:g} × its turnaround slope), so T_c cannot be read off "
-                "the loop: record a larger triangle amplitude or give coulomb_torque_in_oz")
-        t_c = float(np.median([0.5 * b.running_swing_in_oz for b in plateau]))
-        estimated = True
-    else:
-        t_c = float(coulomb_torque_in_oz)
-        estimated = False
-    if not (math.isfinite(t_c) and t_c > 0.0):
-        raise FrictionIdError(f"Coulomb torque T_c = {t_c!r} in-oz: must be > 0")
-
-    nb, ng = len(loop.branches), grid.size
-    slopes = np.full((nb, ng), np.nan)             # dT/dθ per branch and grid point
+    t_c, estimated = _coulomb_torque(loop, coulomb_torque_in_oz, plateau_slope_ratio)
+    ng = grid.size
+    slopes = np.full((len(loop.branches), ng), np.nan)   # dT/dθ per branch and grid point
     for j, b in enumerate(loop.branches):
-        s = b.direction
-        psi = s * (th[b.start:b.stop + 1] - b.reversal_angle_rad)
-        dT = s * (tq[b.start:b.stop + 1] - b.reversal_torque_in_oz)
-        x_mono = np.maximum.accumulate(_moving_average(dT / t_c, SMOOTH_HALF_WIDTH))
-        for i, xg in enumerate(grid):
-            # at the ends of [0, 2] the window is one-sided but keeps its full width 2w:
-            # the first samples of a branch carry the reversal's timing jitter (the noisy
-            # angle's extremum is a few samples off), which a narrower fit would feel most
-            lo = min(max(xg - w, 0.0), 2.0 - 2.0 * w)
-            hi = max(min(xg + w, 2.0), 2.0 * w)
-            if x_mono[-1] < hi:
-                continue                           # the branch does not get through the window
-            a = 0 if lo <= 0.0 else int(np.searchsorted(x_mono, lo, side="left"))
-            e = int(np.searchsorted(x_mono, hi, side="right"))
-            if e - a < MIN_FIT_SAMPLES:
-                continue
-            g = min(int(np.searchsorted(x_mono, xg, side="left")), psi.size - 1)
-            p = psi[a:e] - psi[g]
-            scale = float(np.max(np.abs(p)))
-            if not scale > 0.0:
-                continue
-            coef = np.polynomial.polynomial.polyfit(p / scale, dT[a:e], 2)
-            slopes[j, i] = coef[1] / scale
+        slopes[j] = _branch_slopes(loop, b, grid, w, t_c)
     valid = slopes > 0.0                            # a falling torque on a branch is noise
     counts = np.sum(valid, axis=0)
     with np.errstate(divide="ignore"):

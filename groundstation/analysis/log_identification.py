@@ -318,6 +318,140 @@ def _trim_to_profile(index: np.ndarray) -> tuple[int, int] | None:
 # ======================================================================================
 # frequency response
 # ======================================================================================
+@dataclass(frozen=True)
+class _FrfWindow:
+    """What frf_from_log reads from the log: the window's rows and what describes them."""
+
+    d: dict[str, np.ndarray]
+    rate: float
+    origin: float
+    units: dict[str, str]
+    mode_names: dict[int, str]
+    have_index: bool
+    tbi: _TestbedInfo
+
+
+def _check_frf_channels(input_channel: str, output_channel: str) -> None:
+    if input_channel not in FRF_INPUTS:
+        raise LogIdentificationError(f"input channel {input_channel!r}: choose one of "
+                                     f"{', '.join(FRF_INPUTS)}")
+    if output_channel not in FRF_OUTPUTS:
+        raise LogIdentificationError(f"output channel {output_channel!r}: choose one of "
+                                     f"{', '.join(FRF_OUTPUTS)}")
+
+
+def _read_frf_window(r: LogReader, input_channel: str, output_channel: str, start_s, stop_s,
+                     testbed: str | Path | Testbed | None) -> _FrfWindow:
+    _require(r, [input_channel, output_channel], "this frequency response")
+    chans = {c.name: c for c in r.channels(PACKET)}
+    have_index = "profile_index" in chans
+    i0, i1 = _window_rows(r, start_s, stop_s)
+    columns = [input_channel, output_channel] + (["profile_index"] if have_index else [])
+    columns += ["mode"] if "mode" in chans else []
+    d = r.read_rows(PACKET, columns, i0, i1)
+    rate = r.tick_rate_hz
+    origin = r.origin("device")
+    units = {name: c.units for name, c in chans.items()}
+    mode_names = {v: k for k, v in chans["mode"].states.items()} if "mode" in chans else {}
+    return _FrfWindow(d, rate, origin, units, mode_names, have_index, _testbed_info(r, testbed))
+
+
+def _frf_samples(w: _FrfWindow, input_channel: str, output_channel: str,
+                 trim_to_profile: bool, notes: list[str]
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(t, x, y) of the window narrowed to the profile playing in it and then to its
+    longest stretch without a hole; each narrowing, and a closed loop, noted."""
+    d, origin = w.d, w.origin
+    t = d["device_time"]
+    x = np.asarray(d[input_channel], dtype=np.float64)
+    y = np.asarray(d[output_channel], dtype=np.float64)
+    mode = d.get("mode")
+    if trim_to_profile and w.have_index:
+        span = _trim_to_profile(d["profile_index"])
+        if span is not None and (span[0] > 0 or span[1] < t.size):
+            notes.append(f"window narrowed to the profile playing in it "
+                         f"({t[span[0]] - origin:.3f}..{t[span[1] - 1] - origin:.3f} s)")
+            t, x, y = t[span[0]:span[1]], x[span[0]:span[1]], y[span[0]:span[1]]
+            mode = mode[span[0]:span[1]] if mode is not None else None
+    a, b, missing = _longest_run(t, w.rate)
+    if missing:
+        notes.append(f"{missing} frame(s) missing in the window: the longest stretch without "
+                     f"a hole is used ({b - a} of {t.size} frames)")
+        t, x, y = t[a:b], x[a:b], y[a:b]
+        mode = mode[a:b] if mode is not None else None
+    if mode is not None and mode.size:
+        closed = sorted({w.mode_names.get(int(m), str(int(m))) for m in np.unique(mode)}
+                        - {"OPEN_LOOP"})
+        if closed:
+            notes.append(f"not open loop (mode {', '.join(closed)} in the window): the controller "
+                         f"feeds the output back into the input, so this is not the plant's "
+                         f"response alone")
+    return t, x, y
+
+
+def _check_frf_samples(name: str, x: np.ndarray, y: np.ndarray, rate: float,
+                       nperseg: int | None, input_channel: str, output_channel: str) -> int | None:
+    """Raise if the samples cannot give a frequency response; the segment length as an int."""
+    finite = np.isfinite(x) & np.isfinite(y)
+    if not np.all(finite):
+        raise LogIdentificationError(f"{name}: {int(np.count_nonzero(~finite))} "
+                                     f"non-finite sample(s) of {input_channel}/{output_channel} "
+                                     f"in the window: choose a window without them")
+    n = x.size
+    least = MIN_SEGMENTS * MIN_SEGMENT_SAMPLES
+    if nperseg is not None:
+        nperseg = int(nperseg)
+        least = max(least, nperseg + (MIN_SEGMENTS - 1) * (nperseg - nperseg // 2))
+    if n < least:
+        raise WindowTooShortError(
+            f"{name}: {n} frames ({n / rate:.3g} s) in the window are too few for a "
+            f"frequency response: at least {least}"
+            + (f" with segments of {nperseg}" if nperseg is not None else "")
+            + "; widen the window" + (" or shorten the segments" if nperseg is not None else ""))
+    if not np.ptp(x) > 0.0:
+        raise NoExcitationError(f"{name}: {input_channel} is constant ({x[0]:g}) "
+                                f"over the window: no excitation to measure a response with "
+                                f"(play an open-loop random current, e.g. a sysid profile)")
+    return nperseg
+
+
+@dataclass(frozen=True)
+class _FrfModel:
+    """The testbed model's response beside a measured one (None where there is none)."""
+
+    which: str                      # the model's path, e.g. 'T1->phi1'
+    per_amp: bool
+    model: FrequencyResponse | None = None
+    comparison: FrfComparison | None = None
+    description: str = ""
+
+
+def _frf_model(tbi: _TestbedInfo, measured: FrequencyResponse, input_channel: str,
+               output_channel: str, rate: float, min_coherence: float,
+               notes: list[str]) -> _FrfModel:
+    """The model's response on the measured grid, and the comparison; why there is none
+    (or what it leaves out) goes to `notes`."""
+    model_in, per_amp = FRF_INPUTS[input_channel]
+    which = f"{model_in}->{FRF_OUTPUTS[output_channel]}"
+    if tbi.model is None:
+        notes.append(tbi.note)
+        return _FrfModel(which, per_amp)
+    try:
+        model = model_response(tbi.model, which, measured.freq_hz, sample_rate_hz=rate,
+                               per_amp=per_amp)
+    except AnalysisError as exc:
+        notes.append(f"no model: {exc}")
+        return _FrfModel(which, per_amp)
+    motor = tbi.model.motor_coarse if model_in == "T1" else tbi.model.motor_fine
+    description = (f"{which}, ZOH at {rate:g} Hz, friction-free plant"
+                   + (f", x K_t {motor['torque_constant']:g} in-oz/A" if per_amp else ""))
+    comparison = compare_frf(measured, model, min_coherence=min_coherence)
+    if output_channel == "los_estimate":
+        notes.append("the model's LOS angle leaves out the firmware's complementary "
+                     "filter that makes los_estimate")
+    return _FrfModel(which, per_amp, model, comparison, description)
+
+
 def frf_from_log(path: str | Path, input_channel: str = "current_coarse",
                  output_channel: str = "encoder_outer", start_s: float | None = None,
                  stop_s: float | None = None, nperseg: int | None = None, *,
@@ -328,160 +462,87 @@ def frf_from_log(path: str | Path, input_channel: str = "current_coarse",
 
     nperseg  Welch segment length in samples (None: frf's default, at least 8 segments).
     Raises MissingChannelError, WindowTooShortError, NoExcitationError, LogError."""
-    if input_channel not in FRF_INPUTS:
-        raise LogIdentificationError(f"input channel {input_channel!r}: choose one of "
-                                     f"{', '.join(FRF_INPUTS)}")
-    if output_channel not in FRF_OUTPUTS:
-        raise LogIdentificationError(f"output channel {output_channel!r}: choose one of "
-                                     f"{', '.join(FRF_OUTPUTS)}")
+    _check_frf_channels(input_channel, output_channel)
     with LogReader(path) as r:
-        _require(r, [input_channel, output_channel], "this frequency response")
-        chans = {c.name: c for c in r.channels(PACKET)}
-        have_index = "profile_index" in chans
-        i0, i1 = _window_rows(r, start_s, stop_s)
-        columns = [input_channel, output_channel] + (["profile_index"] if have_index else [])
-        columns += ["mode"] if "mode" in chans else []
-        d = r.read_rows(PACKET, columns, i0, i1)
-        rate = r.tick_rate_hz
-        origin = r.origin("device")
-        units = {name: c.units for name, c in chans.items()}
-        mode_names = {v: k for k, v in chans["mode"].states.items()} if "mode" in chans else {}
-        tbi = _testbed_info(r, testbed)
+        w = _read_frf_window(r, input_channel, output_channel, start_s, stop_s, testbed)
     notes: list[str] = []
-    t = d["device_time"]
-    x = np.asarray(d[input_channel], dtype=np.float64)
-    y = np.asarray(d[output_channel], dtype=np.float64)
-    mode = d.get("mode")
-    if trim_to_profile and have_index:
-        span = _trim_to_profile(d["profile_index"])
-        if span is not None and (span[0] > 0 or span[1] < t.size):
-            notes.append(f"window narrowed to the profile playing in it "
-                         f"({t[span[0]] - origin:.3f}..{t[span[1] - 1] - origin:.3f} s)")
-            t, x, y = t[span[0]:span[1]], x[span[0]:span[1]], y[span[0]:span[1]]
-            mode = mode[span[0]:span[1]] if mode is not None else None
-    a, b, missing = _longest_run(t, rate)
-    if missing:
-        notes.append(f"{missing} frame(s) missing in the window: the longest stretch without "
-                     f"a hole is used ({b - a} of {t.size} frames)")
-        t, x, y = t[a:b], x[a:b], y[a:b]
-        mode = mode[a:b] if mode is not None else None
-    if mode is not None and mode.size:
-        closed = sorted({mode_names.get(int(m), str(int(m))) for m in np.unique(mode)} - {"OPEN_LOOP"})
-        if closed:
-            notes.append(f"not open loop (mode {', '.join(closed)} in the window): the controller "
-                         f"feeds the output back into the input, so this is not the plant's "
-                         f"response alone")
-    finite = np.isfinite(x) & np.isfinite(y)
-    if not np.all(finite):
-        raise LogIdentificationError(f"{Path(path).name}: {int(np.count_nonzero(~finite))} "
-                                     f"non-finite sample(s) of {input_channel}/{output_channel} "
-                                     f"in the window: choose a window without them")
-    n = x.size
-    least = MIN_SEGMENTS * MIN_SEGMENT_SAMPLES
-    if nperseg is not None:
-        nperseg = int(nperseg)
-        least = max(least, nperseg + (MIN_SEGMENTS - 1) * (nperseg - nperseg // 2))
-    if n < least:
-        raise WindowTooShortError(
-            f"{Path(path).name}: {n} frames ({n / rate:.3g} s) in the window are too few for a "
-            f"frequency response: at least {least}"
-            + (f" with segments of {nperseg}" if nperseg is not None else "")
-            + "; widen the window" + (" or shorten the segments" if nperseg is not None else ""))
-    if not np.ptp(x) > 0.0:
-        raise NoExcitationError(f"{Path(path).name}: {input_channel} is constant ({x[0]:g}) "
-                                f"over the window: no excitation to measure a response with "
-                                f"(play an open-loop random current, e.g. a sysid profile)")
-    measured = h1_estimate(x, y, rate, nperseg, input_units=units.get(input_channel, ""),
-                           output_units=units.get(output_channel, ""))
-
-    model_in, per_amp = FRF_INPUTS[input_channel]
-    which = f"{model_in}->{FRF_OUTPUTS[output_channel]}"
-    model = comparison = None
-    description = ""
-    if tbi.model is None:
-        notes.append(tbi.note)
-    else:
-        try:
-            model = model_response(tbi.model, which, measured.freq_hz, sample_rate_hz=rate,
-                                   per_amp=per_amp)
-        except AnalysisError as exc:
-            notes.append(f"no model: {exc}")
-        else:
-            motor = tbi.model.motor_coarse if model_in == "T1" else tbi.model.motor_fine
-            description = (f"{which}, ZOH at {rate:g} Hz, friction-free plant"
-                           + (f", x K_t {motor['torque_constant']:g} in-oz/A" if per_amp else ""))
-            comparison = compare_frf(measured, model, min_coherence=min_coherence)
-            if output_channel == "los_estimate":
-                notes.append("the model's LOS angle leaves out the firmware's complementary "
-                             "filter that makes los_estimate")
+    t, x, y = _frf_samples(w, input_channel, output_channel, trim_to_profile, notes)
+    nperseg = _check_frf_samples(Path(path).name, x, y, w.rate, nperseg, input_channel,
+                                 output_channel)
+    measured = h1_estimate(x, y, w.rate, nperseg, input_units=w.units.get(input_channel, ""),
+                           output_units=w.units.get(output_channel, ""))
+    m = _frf_model(w.tbi, measured, input_channel, output_channel, w.rate, min_coherence, notes)
     return LogFrf(path=Path(path), input_channel=input_channel, output_channel=output_channel,
-                  window_from_s=float(t[0] - origin), window_to_s=float(t[-1] - origin),
-                  frames=int(n), measured=measured, model=model,
-                  model_path=which if model is not None else "", model_per_amp=per_amp,
-                  model_description=description, testbed_source=tbi.source,
-                  comparison=comparison, notes=tuple(notes))
+                  window_from_s=float(t[0] - w.origin), window_to_s=float(t[-1] - w.origin),
+                  frames=int(x.size), measured=measured, model=m.model,
+                  model_path=m.which if m.model is not None else "", model_per_amp=m.per_amp,
+                  model_description=m.description, testbed_source=w.tbi.source,
+                  comparison=m.comparison, notes=tuple(notes))
 
 
 # ======================================================================================
 # hysteresis
 # ======================================================================================
-def hysteresis_from_log(path: str | Path, start_s: float | None = None,
-                        stop_s: float | None = None, angle_channel: str = "encoder_outer",
-                        current_channel: str = "current_coarse", *, coupling: bool = True,
-                        trim_to_profile: bool = True,
-                        testbed: str | Path | Testbed | None = None) -> LogHysteresis:
-    """The bearing's hysteresis loop (friction torque against the outer axis' angle) from
-    a triangle-profile record, and its DB-DHM slope table when the loop allows (see the
-    module docstring).  `current_channel`: current_coarse (x K_t) or torque_coarse_cmd.
-    Raises MissingChannelError, WindowTooShortError, NoExcitationError, LogError."""
+def _check_hysteresis_channels(angle_channel: str, current_channel: str) -> None:
     if angle_channel not in HYSTERESIS_ANGLES:
         raise LogIdentificationError(f"angle channel {angle_channel!r}: the bearing's angle is "
                                      f"{' or '.join(HYSTERESIS_ANGLES)}")
     if current_channel not in HYSTERESIS_DRIVES:
         raise LogIdentificationError(f"drive channel {current_channel!r}: the coarse motor's is "
                                      f"{' or '.join(HYSTERESIS_DRIVES)}")
+
+
+@dataclass(frozen=True)
+class _HysteresisWindow:
+    """What hysteresis_from_log reads from the log."""
+
+    d: dict[str, np.ndarray]
+    origin: float
+    rate: float
+    tbi: _TestbedInfo
+    use_coupling: bool              # the coupling terms wanted and their channels logged
+
+
+def _read_hysteresis_window(r: LogReader, angle_channel: str, current_channel: str,
+                            start_s, stop_s, *, coupling: bool, trim_to_profile: bool,
+                            testbed: str | Path | Testbed | None,
+                            notes: list[str]) -> _HysteresisWindow:
+    fine_channel = HYSTERESIS_DRIVES[current_channel][1]
+    _require(r, [angle_channel, current_channel], "a hysteresis loop")
+    have = {c.name for c in r.channels(PACKET)}
+    i0, i1 = _window_rows(r, start_s, stop_s)
+    tbi = _testbed_info(r, testbed)
+    use_coupling = coupling and tbi.two_dof
+    if use_coupling and not {fine_channel, "encoder_inner"} <= have:
+        notes.append(f"the flexure and fine-motor torques are neglected: the log has no "
+                     f"{' / '.join(sorted({fine_channel, 'encoder_inner'} - have))}")
+        use_coupling = False
+    columns = [angle_channel, current_channel]
+    if use_coupling:
+        columns += [fine_channel, "encoder_inner"]
+    if trim_to_profile and "profile_index" in have:
+        columns.append("profile_index")
+    d = r.read_rows(PACKET, columns, i0, i1)
+    return _HysteresisWindow(d, r.origin("device"), r.tick_rate_hz, tbi, use_coupling)
+
+
+def _bearing_torque(d: dict[str, np.ndarray], angle: np.ndarray, drive: np.ndarray,
+                    current_channel: str, w: _HysteresisWindow, name: str,
+                    notes: list[str]) -> tuple[np.ndarray, str, float | None]:
+    """(torque, its formula, K_t1 if the drive is a current): the friction torque across
+    the bearing as the module docstring makes it."""
     kind, fine_channel = HYSTERESIS_DRIVES[current_channel]
-    notes: list[str] = []
-    with LogReader(path) as r:
-        _require(r, [angle_channel, current_channel], "a hysteresis loop")
-        have = {c.name for c in r.channels(PACKET)}
-        i0, i1 = _window_rows(r, start_s, stop_s)
-        tbi = _testbed_info(r, testbed)
-        use_coupling = coupling and tbi.two_dof
-        if use_coupling and not {fine_channel, "encoder_inner"} <= have:
-            notes.append(f"the flexure and fine-motor torques are neglected: the log has no "
-                         f"{' / '.join(sorted({fine_channel, 'encoder_inner'} - have))}")
-            use_coupling = False
-        columns = [angle_channel, current_channel]
-        if use_coupling:
-            columns += [fine_channel, "encoder_inner"]
-        if trim_to_profile and "profile_index" in have:
-            columns.append("profile_index")
-        d = r.read_rows(PACKET, columns, i0, i1)
-        origin = r.origin("device")
-        rate = r.tick_rate_hz
-    name = Path(path).name
-    t = d["device_time"]
-    if "profile_index" in d:
-        span = _trim_to_profile(d["profile_index"])
-        if span is not None and (span[0] > 0 or span[1] < t.size):
-            notes.append(f"window narrowed to the profile playing in it "
-                         f"({t[span[0]] - origin:.3f}..{t[span[1] - 1] - origin:.3f} s)")
-            d = {key: v[span[0]:span[1]] for key, v in d.items()}
-            t = d["device_time"]
-    angle = np.asarray(d[angle_channel], dtype=np.float64)
-    drive = np.asarray(d[current_channel], dtype=np.float64)
     kt1 = None
     if kind == "current":
-        kt1 = coarse_torque_constant(tbi, name)
+        kt1 = coarse_torque_constant(w.tbi, name)
         torque = kt1 * drive
         formula = "K_t1*i1"
     else:
         torque = drive.copy()
         formula = "T1"
-    if use_coupling:
-        k = tbi.number("mechanics", "flexure_stiffness")
-        kt2 = tbi.number("motor_fine", "torque_constant") if kind == "current" else 1.0
+    if w.use_coupling:
+        k = w.tbi.number("mechanics", "flexure_stiffness")
+        kt2 = w.tbi.number("motor_fine", "torque_constant") if kind == "current" else 1.0
         if k is None or kt2 is None:
             notes.append("the flexure and fine-motor torques are neglected: the testbed does "
                          "not give flexure_stiffness / the fine motor's torque constant")
@@ -490,9 +551,12 @@ def hysteresis_from_log(path: str | Path, start_s: float | None = None,
             torque = torque - kt2 * fine + k * (np.asarray(d["encoder_inner"]) - angle)
             formula += " - K_t2*i2" if kind == "current" else " - T2"
             formula += " + k*(phi2 - phi1)"
-    _, _, missing = _longest_run(t, rate)
-    if missing:
-        notes.append(f"{missing} frame(s) missing in the window (the loop has holes there)")
+    return torque, formula, kt1
+
+
+def _check_loop_samples(name: str, angle: np.ndarray, torque: np.ndarray, drive: np.ndarray,
+                        angle_channel: str, current_channel: str) -> None:
+    """Raise if the samples cannot make a hysteresis loop."""
     n = angle.size
     if n < 3 * 5:          # friction_id's least: three fits of five samples
         raise WindowTooShortError(f"{name}: {n} frames in the window are too few for a "
@@ -510,11 +574,11 @@ def hysteresis_from_log(path: str | Path, start_s: float | None = None,
                                 f"the window (encoder noise; a loop needs at least "
                                 f"{MIN_TRAVEL_RAD * 1e6:g} urad): play the friction triangle "
                                 f"profile in closed loop")
-    try:
-        loop = split_branches(angle, torque)
-    except FrictionIdError as exc:
-        raise NoExcitationError(f"{name}: {exc}") from None
-    identification = None
+
+
+def _slope_table(angle: np.ndarray, torque: np.ndarray, loop: HysteresisLoop,
+                 tbi: _TestbedInfo, notes: list[str]) -> FrictionIdentification | None:
+    """The DB-DHM slope table of the loop, or None with a note saying why not."""
     complete = sum(b.complete for b in loop.branches)
     sigma = tbi.number("friction", "sigma")
     if complete < 2:
@@ -525,14 +589,54 @@ def hysteresis_from_log(path: str | Path, start_s: float | None = None,
                      "(choose a testbed file)")
     else:
         try:
-            identification = identify_friction(angle, torque, sigma_in_oz_per_rad=sigma)
+            return identify_friction(angle, torque, sigma_in_oz_per_rad=sigma)
         except FrictionIdError as exc:
             notes.append(f"no slope table: {exc}")
+    return None
+
+
+def hysteresis_from_log(path: str | Path, start_s: float | None = None,
+                        stop_s: float | None = None, angle_channel: str = "encoder_outer",
+                        current_channel: str = "current_coarse", *, coupling: bool = True,
+                        trim_to_profile: bool = True,
+                        testbed: str | Path | Testbed | None = None) -> LogHysteresis:
+    """The bearing's hysteresis loop (friction torque against the outer axis' angle) from
+    a triangle-profile record, and its DB-DHM slope table when the loop allows (see the
+    module docstring).  `current_channel`: current_coarse (x K_t) or torque_coarse_cmd.
+    Raises MissingChannelError, WindowTooShortError, NoExcitationError, LogError."""
+    _check_hysteresis_channels(angle_channel, current_channel)
+    notes: list[str] = []
+    with LogReader(path) as r:
+        w = _read_hysteresis_window(r, angle_channel, current_channel, start_s, stop_s,
+                                    coupling=coupling, trim_to_profile=trim_to_profile,
+                                    testbed=testbed, notes=notes)
+    name = Path(path).name
+    d, origin = w.d, w.origin
+    t = d["device_time"]
+    if "profile_index" in d:
+        span = _trim_to_profile(d["profile_index"])
+        if span is not None and (span[0] > 0 or span[1] < t.size):
+            notes.append(f"window narrowed to the profile playing in it "
+                         f"({t[span[0]] - origin:.3f}..{t[span[1] - 1] - origin:.3f} s)")
+            d = {key: v[span[0]:span[1]] for key, v in d.items()}
+            t = d["device_time"]
+    angle = np.asarray(d[angle_channel], dtype=np.float64)
+    drive = np.asarray(d[current_channel], dtype=np.float64)
+    torque, formula, kt1 = _bearing_torque(d, angle, drive, current_channel, w, name, notes)
+    _, _, missing = _longest_run(t, w.rate)
+    if missing:
+        notes.append(f"{missing} frame(s) missing in the window (the loop has holes there)")
+    _check_loop_samples(name, angle, torque, drive, angle_channel, current_channel)
+    try:
+        loop = split_branches(angle, torque)
+    except FrictionIdError as exc:
+        raise NoExcitationError(f"{name}: {exc}") from None
+    identification = _slope_table(angle, torque, loop, w.tbi, notes)
     return LogHysteresis(path=Path(path), angle_channel=angle_channel, drive_channel=current_channel,
                          window_from_s=float(t[0] - origin), window_to_s=float(t[-1] - origin),
-                         frames=int(n), loop=loop, identification=identification,
+                         frames=int(angle.size), loop=loop, identification=identification,
                          torque_formula=formula, torque_constant_in_oz_per_a=kt1,
-                         testbed_source=tbi.source, notes=tuple(notes))
+                         testbed_source=w.tbi.source, notes=tuple(notes))
 
 
 # ======================================================================================

@@ -91,21 +91,9 @@ def _first_crossing(t: np.ndarray, n: np.ndarray, level: float) -> float:
     return float(t0 + (level - n0) / (n1 - n0) * (t1 - t0))
 
 
-def step_metrics(time_s, response, reference_step_size: float, start_time_s: float,
-                 effort=None, *, settling_band: float = 0.02,
-                 steady_state_fraction: float = 0.1) -> StepMetrics:
-    """Figures of merit of a step response (definitions in the module docstring).
-
-    time_s               sample times, strictly increasing [s]
-    response             the controlled output (same length), e.g. the LOS angle [rad]
-    reference_step_size  the commanded step in response units (sign = direction; ≠ 0)
-    start_time_s         when the step was commanded
-    effort               optional control effort samples (same length), e.g. torque
-    Raises StepMetricsError for mismatched lengths, non-finite samples, a time axis that
-    does not increase, a zero step, or fewer than 10 samples after the start.
-    """
-    t = _as_1d("time_s", time_s)
-    y = _as_1d("response", response)
+def _checked_arguments(t: np.ndarray, y: np.ndarray, reference_step_size, start_time_s,
+                       settling_band, steady_state_fraction) -> tuple[float, float, float, float]:
+    """(step, start time, settling band, steady-state fraction), checked with the samples."""
     if t.size != y.size:
         raise StepMetricsError(f"time_s and response must have the same length: "
                                f"{t.size} vs {y.size}")
@@ -127,6 +115,11 @@ def step_metrics(time_s, response, reference_step_size: float, start_time_s: flo
     if not 0.0 < frac <= 1.0:
         raise StepMetricsError(f"steady_state_fraction = {steady_state_fraction!r}: must be "
                                f"in (0, 1]")
+    return step, t_start, band, frac
+
+
+def _first_after_start(t: np.ndarray, t_start: float) -> int:
+    """Index of the first sample at or after the step; raises if too few follow it."""
     post = t >= t_start
     n_post = int(np.count_nonzero(post))
     if n_post < MIN_POST_STEP_SAMPLES:
@@ -135,7 +128,54 @@ def step_metrics(time_s, response, reference_step_size: float, start_time_s: flo
                                f"{MIN_POST_STEP_SAMPLES}; the record spans "
                                f"{t[0]:g} … {t[-1]:g} s)" if t.size else
                                "record is empty")
-    first = int(np.argmax(post))
+    return int(np.argmax(post))
+
+
+def _settling_time(t_after: np.ndarray, n_after: np.ndarray, band: float) -> float:
+    """When the normalised response enters the band for good (NaN: it ends outside)."""
+    outside = np.abs(n_after - 1.0) > band
+    if outside[-1]:
+        return math.nan
+    if not np.any(outside):
+        return 0.0
+    j = int(np.flatnonzero(outside)[-1])     # last sample outside; j + 1 is inside
+    # interpolate where |n − 1| crosses the band between samples j and j + 1
+    e0, e1 = abs(n_after[j] - 1.0), abs(n_after[j + 1] - 1.0)
+    fr = (e0 - band) / (e0 - e1) if e0 != e1 else 1.0
+    return float(t_after[j] + fr * (t_after[j + 1] - t_after[j]))
+
+
+def _peak_effort(effort, t: np.ndarray, first: int, t_start: float) -> tuple[float, float]:
+    """(largest |effort| from the step on, its time after the step); NaNs without effort."""
+    if effort is None:
+        return math.nan, math.nan
+    u = _as_1d("effort", effort)
+    if u.size != t.size:
+        raise StepMetricsError(f"effort must have the same length as time_s: "
+                               f"{u.size} vs {t.size}")
+    ua = np.abs(u[first:])
+    iu = int(np.argmax(ua))
+    return float(ua[iu]), float(t[first + iu] - t_start)
+
+
+def step_metrics(time_s, response, reference_step_size: float, start_time_s: float,
+                 effort=None, *, settling_band: float = 0.02,
+                 steady_state_fraction: float = 0.1) -> StepMetrics:
+    """Figures of merit of a step response (definitions in the module docstring).
+
+    time_s               sample times, strictly increasing [s]
+    response             the controlled output (same length), e.g. the LOS angle [rad]
+    reference_step_size  the commanded step in response units (sign = direction; ≠ 0)
+    start_time_s         when the step was commanded
+    effort               optional control effort samples (same length), e.g. torque
+    Raises StepMetricsError for mismatched lengths, non-finite samples, a time axis that
+    does not increase, a zero step, or fewer than 10 samples after the start.
+    """
+    t = _as_1d("time_s", time_s)
+    y = _as_1d("response", response)
+    step, t_start, band, frac = _checked_arguments(t, y, reference_step_size, start_time_s,
+                                                   settling_band, steady_state_fraction)
+    first = _first_after_start(t, t_start)
     y0 = float(y[first - 1]) if first > 0 and t[first] > t_start else float(y[first])
     target = y0 + step
     # from the step on; a baseline sample just before the start anchors the interpolation
@@ -151,34 +191,13 @@ def step_metrics(time_s, response, reference_step_size: float, start_time_s: flo
     t_after = tp[1:] if lo < first else tp
     ipk = int(np.argmax(n_after))
     overshoot = max(0.0, float(n_after[ipk]) - 1.0) * 100.0
-
-    outside = np.abs(n_after - 1.0) > band
-    if outside[-1]:
-        settling = math.nan
-    elif not np.any(outside):
-        settling = 0.0
-    else:
-        j = int(np.flatnonzero(outside)[-1])     # last sample outside; j + 1 is inside
-        # interpolate where |n − 1| crosses the band between samples j and j + 1
-        e0, e1 = abs(n_after[j] - 1.0), abs(n_after[j + 1] - 1.0)
-        fr = (e0 - band) / (e0 - e1) if e0 != e1 else 1.0
-        settling = float(t_after[j] + fr * (t_after[j + 1] - t_after[j]))
+    settling = _settling_time(t_after, n_after, band)
 
     k = max(int(math.ceil(frac * n_after.size)), 1)
     y_tail = y[-k:]
     sse = target - float(np.mean(y_tail))
     window = float(t[-1] - t[-k]) if k > 1 else 0.0
-
-    if effort is None:
-        peak_effort, peak_effort_t = math.nan, math.nan
-    else:
-        u = _as_1d("effort", effort)
-        if u.size != t.size:
-            raise StepMetricsError(f"effort must have the same length as time_s: "
-                                   f"{u.size} vs {t.size}")
-        ua = np.abs(u[first:])
-        iu = int(np.argmax(ua))
-        peak_effort, peak_effort_t = float(ua[iu]), float(t[first + iu] - t_start)
+    peak_effort, peak_effort_t = _peak_effort(effort, t, first, t_start)
 
     return StepMetrics(
         rise_time_s=float(rise), overshoot_percent=overshoot, settling_time_s=settling,

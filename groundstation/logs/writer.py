@@ -50,129 +50,175 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
     # Ctrl-C in a terminal, or a SIGTERM to the process group (a service manager, `kill
     # -TERM -PGID`), reaches the writer too.  It must not die of it: the parent decides
     # how the recording ends and tells it to close ("stop"); if the parent is gone, the
-    # writer notices (below) and closes the file itself.
+    # writer notices (_Writer.receive) and closes the file itself.
     ignore_terminal_interrupt()
     if config.get("writer_niceness"):
         # not permitted here (OSError): the writer runs at the usual priority
         with contextlib.suppress(OSError):
             os.nice(config["writer_niceness"])
-    d = load_dictionary(protocol_dir)
-    codec = FrameCodec(d)
-    parent = os.getppid()
-    lf: LogFile | None = None
+    _Writer(inbox, outbox, load_dictionary(protocol_dir), config).run()
 
-    def open_file(path: Path, run: int) -> LogFile:
-        f = LogFile(path, d, test_name=config["test_name"], run=run, notes=config["notes"],
-                    testbed_text=config["testbed_text"], testbed_name=config["testbed_name"],
-                    testbed_path=config["testbed_path"], compression=config.get("compression"),
-                    chunk_rows=config.get("chunk_rows"))
+
+class _Writer:
+    """One recording in the writer process: the open file, what waits to be written to
+    it, and whether (and why) the recording is ending."""
+
+    def __init__(self, inbox, outbox, dictionary, config: dict[str, Any]) -> None:
+        self.inbox, self.outbox, self.config = inbox, outbox, config
+        self.dictionary = dictionary
+        self.codec = FrameCodec(dictionary)
+        self.parent = os.getppid()
+        self.lf: LogFile | None = None
+        self.run_number: int = config["run"]
+        self.blocks: list = []
+        self.journal: list = []
+        self.stopping = False
+        self.stop_reason = ""
+
+    def open_file(self, path: Path, run: int) -> LogFile:
+        """A new log file at `path`, its first journal record written and flushed."""
+        config = self.config
+        f = LogFile(path, self.dictionary, test_name=config["test_name"], run=run,
+                    notes=config["notes"], testbed_text=config["testbed_text"],
+                    testbed_name=config["testbed_name"], testbed_path=config["testbed_path"],
+                    compression=config.get("compression"), chunk_rows=config.get("chunk_rows"))
         f.journal([(time.time(), "recorder", {"action": "started", "file": path.name,
                                               "run": run, "test_name": config["test_name"]}, b"")])
         f.flush()
         return f
 
-    # the recorder created this file, empty and exclusively (reserve_log_path), for this
-    # writer alone: LogFile's truncating create of it overwrites nothing
-    path, run = Path(config["path"]), config["run"]
-    try:
-        lf = open_file(path, run)
-    except Exception as exc:
-        outbox.put(StartFailed(f"cannot create log file: {_explain(exc, path)}"))
-        return
-    outbox.put(Started(str(path)))
-    blocks: list = []
-    journal: list = []
-    interval = config["flush_interval_s"]
-    next_flush = time.monotonic() + interval
-    stopping = False
-    stop_reason = ""
-    while not stopping:
+    def run(self) -> None:
+        """Open the first file, then alternate receiving and writing until the recording ends."""
+        # the recorder created this file, empty and exclusively (reserve_log_path), for this
+        # writer alone: LogFile's truncating create of it overwrites nothing
+        path = Path(self.config["path"])
         try:
-            msg = inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
-            while True:
-                if isinstance(msg, Frames):
-                    pkt = codec.packet(msg.packet_id)
-                    data, host = msg.data, msg.host_time
-                    if pkt.variable_item is None:
-                        arr = np.frombuffer(data, np.uint8).reshape(len(host), -1)
-                        blocks.append(codec.decode_fixed(pkt, arr, host))
-                    else:
-                        blocks.append(codec.decode_variable(pkt, data, host))
-                elif isinstance(msg, JournalEntry):
-                    journal.append((msg.at, msg.kind, msg.record, msg.blob))
-                elif isinstance(msg, Stop):
-                    stopping = True
-                    stop_reason = msg.reason
-                    break
-                msg = inbox.get_nowait()
+            self.lf = self.open_file(path, self.run_number)
+        except Exception as exc:
+            self.outbox.put(StartFailed(f"cannot create log file: {_explain(exc, path)}"))
+            return
+        self.outbox.put(Started(str(path)))
+        interval = self.config["flush_interval_s"]
+        next_flush = time.monotonic() + interval
+        while not self.stopping:
+            self.receive(next_flush)
+            if time.monotonic() < next_flush and not self.stopping:
+                continue
+            next_flush = time.monotonic() + interval
+            if self.stop_if_space_short() or self.write_pending():
+                return
+
+    def receive(self, next_flush: float) -> None:
+        """Take what arrives until the next flush is due, a stop is asked, or the parent
+        is gone."""
+        try:
+            msg = self.inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
+            while not self.take(msg):
+                msg = self.inbox.get_nowait()
         except queue.Empty:
             pass
         except (EOFError, OSError):        # the parent went away: finish cleanly
-            stopping = True
-            stop_reason = stop_reason or "the recording program's queue closed"
-        if os.getppid() != parent:         # parent killed: keep what we have, close cleanly
-            stopping = True
-            stop_reason = stop_reason or "the recording program ended without closing the log"
-        if time.monotonic() < next_flush and not stopping:
-            continue
-        next_flush = time.monotonic() + interval
-        short = _space_short(lf, blocks, journal)
-        if short:
-            # stop while the file can still be closed properly: a write that fails for
-            # want of space can leave HDF5's end-of-file pointer past the real end
-            try:
-                lf.journal([(time.time(), "recorder", {"action": "stopped", "reason": short}, b"")])
-                lf.flush()
-                lf.close(clean=True)
-            except Exception:   # the margin was not enough after all; the flushed part stands
-                pass
-            outbox.put(Failed(short, lf.last_host_time, lf.frames_written))
-            return
+            self.stopping = True
+            self.stop_reason = self.stop_reason or "the recording program's queue closed"
+        if os.getppid() != self.parent:    # parent killed: keep what we have, close cleanly
+            self.stopping = True
+            self.stop_reason = (self.stop_reason
+                                or "the recording program ended without closing the log")
+
+    def take(self, msg) -> bool:
+        """Queue one message's frames or journal record; True for a stop."""
+        if isinstance(msg, Frames):
+            pkt = self.codec.packet(msg.packet_id)
+            data, host = msg.data, msg.host_time
+            if pkt.variable_item is None:
+                arr = np.frombuffer(data, np.uint8).reshape(len(host), -1)
+                self.blocks.append(self.codec.decode_fixed(pkt, arr, host))
+            else:
+                self.blocks.append(self.codec.decode_variable(pkt, data, host))
+        elif isinstance(msg, JournalEntry):
+            self.journal.append((msg.at, msg.kind, msg.record, msg.blob))
+        elif isinstance(msg, Stop):
+            self.stopping = True
+            self.stop_reason = msg.reason
+            return True
+        return False
+
+    def stop_if_space_short(self) -> bool:
+        """Close the file and report the failure if the next write might not fit; True
+        when it did."""
+        lf = self.lf
+        short = _space_short(lf, self.blocks, self.journal)
+        if not short:
+            return False
+        # stop while the file can still be closed properly: a write that fails for
+        # want of space can leave HDF5's end-of-file pointer past the real end
         try:
-            lf.append(blocks)
-            if stopping:
-                closing = {"action": "stopped", "frames": lf.frames_written}
-                if stop_reason:
-                    closing["reason"] = stop_reason
-                journal.append((time.time(), "recorder", closing, b""))
-            lf.journal(journal)
+            lf.journal([(time.time(), "recorder", {"action": "stopped", "reason": short}, b"")])
             lf.flush()
-            blocks, journal = [], []
-            outbox.put(Flushed(lf.frames_written, lf.size_bytes, lf.last_host_time, str(lf.path)))
-            if stopping:
+            lf.close(clean=True)
+        except Exception:   # the margin was not enough after all; the flushed part stands
+            pass
+        self.outbox.put(Failed(short, lf.last_host_time, lf.frames_written))
+        return True
+
+    def write_pending(self) -> bool:
+        """Write and flush what waits, then close the file if stopping or roll over to
+        the next one if due; True when the recording has ended."""
+        lf = self.lf
+        try:
+            lf.append(self.blocks)
+            if self.stopping:
+                closing = {"action": "stopped", "frames": lf.frames_written}
+                if self.stop_reason:
+                    closing["reason"] = self.stop_reason
+                self.journal.append((time.time(), "recorder", closing, b""))
+            lf.journal(self.journal)
+            lf.flush()
+            self.blocks, self.journal = [], []
+            self.outbox.put(Flushed(lf.frames_written, lf.size_bytes, lf.last_host_time,
+                                    str(lf.path)))
+            if self.stopping:
                 lf.close(clean=True)
-                outbox.put(Stopped(lf.frames_written, str(lf.path)))
-                return
-            if _rollover_due(lf, config):
-                lf.journal([(time.time(), "recorder", {"action": "rollover"}, b"")])
-                lf.close(clean=True)
-                outbox.put(Closed(lf.frames_written, str(lf.path)))
-                following = None
-                try:
-                    # reserved (created exclusively) by this writer, like the first file
-                    # by the recorder: never a name another recording holds
-                    following, run = _next_path(config, run + 1)
-                    lf = open_file(following, run)
-                except Exception as exc:
-                    # the closed file keeps everything; the new one holds nothing of the
-                    # recording and is this writer's own: it goes
-                    if following is not None:
-                        _remove_own_file(following)
-                    why = _explain(exc, following or Path(config["folder"]) / "(next file)")
-                    outbox.put(Failed(f"could not start the next file after {lf.path.name}: "
-                                      f"{why}", lf.last_host_time, 0))
-                    outbox.close()
-                    outbox.join_thread()
-                    os._exit(3)         # as below: HDF5's state after a failed create
-                outbox.put(Started(str(following)))
+                self.outbox.put(Stopped(lf.frames_written, str(lf.path)))
+                return True
+            if _rollover_due(lf, self.config):
+                self.roll_over()
         except Exception as exc:
-            last = lf.last_host_time
-            outbox.put(Failed(_explain(exc, lf.path), last, lf.frames_written))
-            outbox.close()
-            outbox.join_thread()
             # no close, no cleanup: after a failed write HDF5 may crash while closing; the
             # flushed part of the file is already safe on disk
-            os._exit(3)
+            self.exit_failed(_explain(exc, self.lf.path), self.lf.last_host_time,
+                             self.lf.frames_written)
+        return False
+
+    def roll_over(self) -> None:
+        """Close the current file and continue the recording in the next one."""
+        lf = self.lf
+        lf.journal([(time.time(), "recorder", {"action": "rollover"}, b"")])
+        lf.close(clean=True)
+        self.outbox.put(Closed(lf.frames_written, str(lf.path)))
+        following = None
+        try:
+            # reserved (created exclusively) by this writer, like the first file
+            # by the recorder: never a name another recording holds
+            following, self.run_number = _next_path(self.config, self.run_number + 1)
+            self.lf = self.open_file(following, self.run_number)
+        except Exception as exc:
+            # the closed file keeps everything; the new one holds nothing of the
+            # recording and is this writer's own: it goes
+            if following is not None:
+                _remove_own_file(following)
+            why = _explain(exc, following or Path(self.config["folder"]) / "(next file)")
+            # as after a failed write: HDF5's state after a failed create is not trusted
+            self.exit_failed(f"could not start the next file after {lf.path.name}: {why}",
+                             lf.last_host_time, 0)
+        self.outbox.put(Started(str(following)))
+
+    def exit_failed(self, why: str, last_host_time, frames: int) -> None:
+        """Report the failure and end the process at once, without closing the file."""
+        self.outbox.put(Failed(why, last_host_time, frames))
+        self.outbox.close()
+        self.outbox.join_thread()
+        os._exit(3)
 
 
 SPACE_MARGIN = 256 * 1024     # bytes kept free for metadata, chunk rounding and the close
