@@ -11,6 +11,10 @@ Stretches that must not be joined (samples excluded because the sensor was out o
 range, frames missing in the telemetry) are handled by averaging only Welch segments
 that lie wholly inside one contiguous stretch: a segment never spans a hole.
 
+`psd_of_segments()` is `psd()` with the segment length in samples, and `psd_by_time()`
+the live spectrum view's PSD: a short record given by its sample times, split where the
+time jumps or frames were lost, the segment length chosen from its longest stretch.
+
 `WelchAccumulator` computes the same average from a signal fed in pieces (a log read
 in chunks): it keeps the unfinished segment's samples from one piece to the next, so
 the segments - and hence the result - are the same as for the whole array in memory.
@@ -161,6 +165,15 @@ def psd(x, rate_hz: float, *, segment_s: float = DEFAULT_SEGMENT_S, valid=None, 
     if a.ndim != 1 or len(a) == 0:
         raise AnalysisError("the PSD needs a non-empty 1-D series")
     nperseg = segment_samples(rate_hz, segment_s, len(a))
+    return psd_of_segments(a, rate_hz, nperseg, valid=valid, gap_before=gap_before, units=units)
+
+
+def psd_of_segments(x, rate_hz: float, nperseg: int, *, valid=None, gap_before=None,
+                    units: str = "rad") -> Spectrum:
+    """Welch PSD of `x` with segments of `nperseg` samples: every segment that lies
+    wholly inside one contiguous stretch (`valid`, `gap_before` as for `runs`) counts
+    once in the average.  `psd()` with the segment length in samples."""
+    a = np.asarray(x, dtype=float)
     total, count, f = None, 0, None
     for i0, i1 in runs(len(a), valid, gap_before):
         fr, s, k = _welch_sum(a[i0:i1], rate_hz, nperseg)
@@ -173,6 +186,56 @@ def psd(x, rate_hz: float, *, segment_s: float = DEFAULT_SEGMENT_S, valid=None, 
                             f"({nperseg / rate_hz:g} s) for a PSD segment: shorten the segment "
                             f"or choose a window with fewer excluded samples and gaps")
     return Spectrum(f, total / count, units, float(rate_hz), nperseg, count)
+
+
+MIN_SEGMENT = 64                  # the shortest segment psd_by_time uses
+MAX_SEGMENT = 8192
+
+
+def time_breaks(t, gap_times=None) -> np.ndarray:
+    """`gap_before` for samples stamped with times `t` (seconds, rising): a stretch ends
+    where the time jumps by more than 1.5 sample periods (the median spacing), and at
+    the first sample at or after each of `gap_times` (where frames went missing)."""
+    t = np.asarray(t, dtype=float)
+    n = len(t)
+    brk = np.zeros(n, dtype=bool)
+    if n < 2:
+        return brk
+    period = float(np.median(np.diff(t)))
+    brk[1:] = np.diff(t) > 1.5 * period
+    if gap_times is not None and len(gap_times):
+        idx = np.searchsorted(t, np.asarray(gap_times, dtype=float), side="left")
+        brk[idx[idx < n]] = True
+    return brk
+
+
+def psd_by_time(t, x, gap_times=None, *, max_segment: int = MAX_SEGMENT,
+                units: str = "") -> Spectrum | None:
+    """Welch PSD of a short record given by its sample times, as the live spectrum view
+    shows it: the rate is the median sample spacing's, a stretch ends at a NaN, a time
+    jump or a sequence gap (`time_breaks`), and the segment length is the largest power
+    of two giving about four segments in the longest stretch (`MIN_SEGMENT` ..
+    `max_segment`).  None when fewer than `MIN_SEGMENT` samples are recorded, the times
+    do not rise, or no stretch holds a whole segment.
+
+    Every segment counts once in the average, as in `psd()`: a stretch weighs in by its
+    number of segments.  (The live view used to weight each stretch's mean by its
+    length in samples; with one stretch, the usual case, the two are the same.)"""
+    t = np.asarray(t, dtype=float)
+    a = np.asarray(x, dtype=float)
+    if len(t) < MIN_SEGMENT:
+        return None
+    period = float(np.median(np.diff(t)))
+    if not period > 0:
+        return None
+    valid = np.isfinite(a)
+    gap_before = time_breaks(t, gap_times)
+    longest = max((i1 - i0 for i0, i1 in runs(len(a), valid, gap_before)), default=0)
+    if longest < MIN_SEGMENT:
+        return None
+    nperseg = int(min(max_segment, max(MIN_SEGMENT, 2 ** int(math.log2(max(longest // 4, 1))))))
+    return psd_of_segments(a, 1.0 / period, nperseg, valid=valid, gap_before=gap_before,
+                           units=units)
 
 
 class WelchAccumulator:
@@ -221,5 +284,6 @@ class WelchAccumulator:
                         self.rate_hz, self.nperseg, self.segments)
 
 
-__all__ = ["DEFAULT_SEGMENT_S", "OVERLAP", "Spectrum", "WINDOW", "WelchAccumulator", "csp", "psd",
-           "runs", "segment_samples"]
+__all__ = ["DEFAULT_SEGMENT_S", "MAX_SEGMENT", "MIN_SEGMENT", "OVERLAP", "Spectrum", "WINDOW",
+           "WelchAccumulator", "csp", "psd", "psd_by_time", "psd_of_segments", "runs",
+           "segment_samples", "time_breaks"]

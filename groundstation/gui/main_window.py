@@ -55,7 +55,7 @@ class MainWindow(QMainWindow):
         self.charts = StripChartPanel(session.store, d)
         self.setCentralWidget(self.charts)
         self.tree = ChannelTree(d)
-        self.tree.sig_channel_activated.connect(lambda cid: self.charts.add_channel(cid))
+        self.tree.sig_channel_activated.connect(lambda cid: self.charts.stack.add_channel(cid))
         self.status_panel = StatusPanel(session)
         self.commands = CommandPanel(session)
         self.commands.sig_abort.connect(self.abort)
@@ -155,7 +155,7 @@ class MainWindow(QMainWindow):
         m = self.menuBar().addMenu("D&emo")
         m.addAction(self.demo_action)
         m = self.menuBar().addMenu("&View")
-        action(m, "&Pause charts", lambda: self.charts.set_paused(not self.charts.paused), "Ctrl+Space")
+        action(m, "&Pause charts", lambda: self.charts.set_paused(not self.charts.settings.paused), "Ctrl+Space")
         for dock in self.docks.values():
             m.addAction(dock.toggleViewAction())
         action(m, "Reset layout", self.reset_layout)
@@ -314,13 +314,13 @@ class MainWindow(QMainWindow):
             except ValueError:
                 state = None                              # damaged settings: defaults
             if isinstance(state, dict):
-                self.charts.restore_state(state)
+                self.charts.settings.restore_state(state)
 
     def save(self) -> None:
         self.settings.setValue("geometry", self.saveGeometry())
         self.settings.setValue("window_state", self.saveState())
         # as JSON text: QSettings would hand numbers and booleans back as strings
-        self.settings.setValue("charts", json.dumps(self.charts.state()))
+        self.settings.setValue("charts", json.dumps(self.charts.settings.state()))
 
     def reset_layout(self) -> None:
         self.charts.set_layout(DEFAULT_LAYOUT)

@@ -11,7 +11,8 @@ import pytest
 from scipy import signal
 
 from groundstation.analysis import AnalysisError, WelchAccumulator, csp, psd
-from groundstation.analysis.spectra import runs, segment_samples
+from groundstation.analysis.spectra import (MIN_SEGMENT, psd_by_time, runs, segment_samples,
+                                             time_breaks)
 from groundstation.core.dictionary import default_control_rate_hz
 
 RATE_HZ = default_control_rate_hz()
@@ -125,6 +126,50 @@ def test_no_segment_that_fits_is_an_actionable_error():
         acc.result()
     with pytest.raises(AnalysisError, match="segment length must be > 0"):
         psd(np.zeros(10), RATE_HZ, segment_s=0.0)
+
+
+def test_the_live_psd_drops_nan_and_short_stretches():
+    t = np.arange(4096) / RATE_HZ
+    y = np.sin(2 * np.pi * 100 * t)
+    y[2000] = np.nan
+    s = psd_by_time(t, y)
+    assert s.rate_hz == pytest.approx(RATE_HZ) and np.isfinite(s.density).all()
+    assert s.frequency_hz[np.argmax(s.density)] == pytest.approx(100, abs=3)
+    assert psd_by_time(t[:10], y[:10]) is None                     # fewer than MIN_SEGMENT
+    assert psd_by_time(np.zeros(100), np.zeros(100)) is None        # times that do not rise
+
+
+def test_the_live_psd_of_one_stretch_is_scipys_welch():
+    """Its segment: the largest power of two giving about four segments."""
+    rng = np.random.default_rng(3)
+    t = np.arange(5000) / RATE_HZ
+    y = rng.standard_normal(5000)
+    s = psd_by_time(t, y, units="rad")
+    assert s.segment_samples == 1024 and s.units == "rad"
+    f, p = signal.welch(y, fs=RATE_HZ, nperseg=1024)
+    np.testing.assert_allclose(s.frequency_hz, f)
+    np.testing.assert_allclose(s.density, p, rtol=1e-12)
+
+
+def test_the_live_psd_splits_at_time_jumps_and_lost_frames():
+    rng = np.random.default_rng(4)
+    t = np.arange(6000) / RATE_HZ
+    t[4000:] += 0.5                                  # the clock jumps: a new stretch
+    gap_at = t[1000]                                 # frames lost before sample 1000
+    assert np.flatnonzero(time_breaks(t, [gap_at])).tolist() == [1000, 4000]
+    y = rng.standard_normal(6000)
+    s = psd_by_time(t, y, [gap_at])
+    assert s.segment_samples == 512                  # the longest stretch: 3000 samples
+    # every segment counts once: the average of the three stretches' segments
+    parts = [signal.welch(y[a:b], fs=RATE_HZ, nperseg=512) for a, b in ((0, 1000), (1000, 4000),
+                                                                       (4000, 6000))]
+    counts = [(b - a - 256) // 256 for a, b in ((0, 1000), (1000, 4000), (4000, 6000))]
+    expected = sum(p * k for (_, p), k in zip(parts, counts)) / sum(counts)
+    assert s.segments == sum(counts)
+    np.testing.assert_allclose(s.density, expected, rtol=1e-12)
+    short = t[:MIN_SEGMENT + 10].copy()
+    short[MIN_SEGMENT // 2:] += 1.0                  # no stretch holds a segment
+    assert psd_by_time(short, y[:len(short)]) is None
 
 
 def test_the_base_motion_check_uses_this_csp():

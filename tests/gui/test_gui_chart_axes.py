@@ -45,7 +45,7 @@ def test_sticky_range_keeps_until_the_data_leave_or_shrink():
 
 def test_autoscaled_y_range_holds_while_the_data_stay_inside(panel, dictionary):
     feed = HighRateFeeder(dictionary, panel.store)
-    panel.add_channel("HIGH_RATE.error_angle")
+    panel.stack.add_channel("HIGH_RATE.error_angle")
     panel.set_window_seconds(5.0)
     rng = np.random.default_rng(2)
     total, ranges = 0, []
@@ -55,32 +55,32 @@ def test_autoscaled_y_range_holds_while_the_data_stay_inside(panel, dictionary):
         total += 40
         panel.refresh()
         if total > 1300:                              # a few cycles: the range is set
-            ranges.append(panel.plots[0].y_range())
+            ranges.append(panel.stack.plots[0].y_range())
     assert len(set(ranges)) == 1
     lo, hi = ranges[0]
     assert lo < -1e-4 and hi > 1e-4 and hi - lo < 4e-4
     # the round range's ends (where ticks and their labels go) sit inside the view, by
     # EDGE of the range, so a label at an end is not drawn over the neighbouring plot
-    a, b = panel.plots[0].getPlotItem().getViewBox()._round_range
+    a, b = panel.stack.plots[0].getPlotItem().getViewBox()._round_range
     assert lo < a < b < hi
     assert a - lo == pytest.approx(EDGE * (b - a)) and hi - b == pytest.approx(EDGE * (b - a))
     fine = 10.0 ** (math.floor(math.log10(b - a)) - 1)      # the ends are round numbers
     assert a / fine == pytest.approx(round(a / fine)) and b / fine == pytest.approx(round(b / fine))
     feed(np.arange(total, total + 40), error_angle=np.full(40, 5e-4))  # out of the range
     panel.refresh()
-    assert panel.plots[0].y_range()[1] >= 5e-4
+    assert panel.stack.plots[0].y_range()[1] >= 5e-4
 
 
 # ---------------------------------------------------------------- time axis
 def test_live_time_axis_stays_put_and_times_stay_absolute(panel, dictionary):
     feed = HighRateFeeder(dictionary, panel.store)
-    panel.add_channel("HIGH_RATE.error_angle")
-    panel.add_channel("HIGH_RATE.encoder_outer", 1)
+    panel.stack.add_channel("HIGH_RATE.error_angle")
+    panel.stack.add_channel("HIGH_RATE.encoder_outer", 1)
     panel.set_window_seconds(2.0)
     feed(np.arange(0, 1200), error_angle=np.zeros(1200), encoder_outer=np.zeros(1200))
     panel.refresh()
     changes = []
-    for plot in panel.plots:
+    for plot in panel.stack.plots:
         plot.getPlotItem().getViewBox().sigXRangeChanged.connect(lambda *a: changes.append(a))
     for k in range(1, 6):
         s = np.arange(1200 + 40 * (k - 1), 1200 + 40 * k)
@@ -89,32 +89,32 @@ def test_live_time_axis_stays_put_and_times_stay_absolute(panel, dictionary):
         panel.refresh()
     assert changes == []                                     # the view's x range never moved
     newest = panel.store.ring("HIGH_RATE").newest_time()
-    for plot in panel.plots:
+    for plot in panel.stack.plots:
         vb = plot.getPlotItem().getViewBox()
         assert vb.viewRange()[0] == pytest.approx([-2.0, 0.0])
         assert plot.x_range() == pytest.approx((newest - 2.0, newest))
         assert plot.time_axis.relative
-    shown = [line for line in panel.plots[0].gap_lines if line.isVisible()]
+    shown = [line for line in panel.stack.plots[0].gap_lines if line.isVisible()]
     assert len(shown) == 1 and shown[0].value() == pytest.approx((1280 + 100) / RATE)
     # where the gap line is on screen: its absolute time minus the newest one
-    vb = panel.plots[0].getPlotItem().getViewBox()
+    vb = panel.stack.plots[0].getPlotItem().getViewBox()
     vb.updateMatrix()                                        # as the next paint would
     at = vb.mapSceneToView(shown[0].mapToScene(0.0, 0.0)).x()
     assert at == pytest.approx(shown[0].value() - newest)
-    x, _ = panel.plots[0].curves["HIGH_RATE.error_angle"].getData()
+    x, _ = panel.stack.plots[0].curves["HIGH_RATE.error_angle"].getData()
     assert x[-1] == pytest.approx(newest)                    # the curve's data: absolute
     panel.set_cursor(newest - 0.5)
-    assert panel.plots[1].cursor.value() == pytest.approx(newest - 0.5)
+    assert panel.stack.plots[1].cursor.value() == pytest.approx(newest - 0.5)
     assert "newest" in panel._newest_text()
 
     panel.set_paused(True)
     panel.refresh()
-    for plot in panel.plots:
+    for plot in panel.stack.plots:
         assert not plot.time_axis.relative and plot.origin == 0.0
         assert plot.getPlotItem().getViewBox().viewRange()[0] == pytest.approx(
             [newest - 2.0, newest])
         assert plot.x_range() == pytest.approx((newest - 2.0, newest))
     panel.set_paused(False)
     panel.refresh()
-    assert panel.plots[0].time_axis.relative
-    assert panel.plots[0].getPlotItem().getViewBox().viewRange()[0] == pytest.approx([-2.0, 0.0])
+    assert panel.stack.plots[0].time_axis.relative
+    assert panel.stack.plots[0].getPlotItem().getViewBox().viewRange()[0] == pytest.approx([-2.0, 0.0])

@@ -47,7 +47,7 @@ def _feed(panel, dictionary, start, n, scales=(1e-4, 1.0, 10.0, 0.01)):
 
 
 def _plot_centre(panel, i) -> QPoint:
-    rect = panel.plots[i].getPlotItem().getViewBox().sceneBoundingRect()
+    rect = panel.stack.plots[i].getPlotItem().getViewBox().sceneBoundingRect()
     return panel.column.mapFromScene(rect.center())
 
 
@@ -56,7 +56,7 @@ def test_four_plots_one_view_one_paint_a_frame(panel, dictionary, qtbot):
     views = panel.findChildren(QGraphicsView)
     assert views == [panel.column]
     scene = panel.column.scene()
-    assert all(p.getPlotItem().scene() is scene for p in panel.plots)
+    assert all(p.getPlotItem().scene() is scene for p in panel.stack.plots)
     _feed(panel, dictionary, 0, 2400)
     panel.refresh()
     qtbot.wait(50)
@@ -67,12 +67,12 @@ def test_four_plots_one_view_one_paint_a_frame(panel, dictionary, qtbot):
         QApplication.processEvents()
     assert paints.count == 5                    # one paint event serves all four plots
     # the plots are stacked top to bottom, the same width, their data areas aligned
-    tops = [p.getPlotItem().geometry().top() for p in panel.plots]
+    tops = [p.getPlotItem().geometry().top() for p in panel.stack.plots]
     assert tops == sorted(tops)
-    lefts = {round(p.getPlotItem().getViewBox().sceneBoundingRect().left()) for p in panel.plots}
+    lefts = {round(p.getPlotItem().getViewBox().sceneBoundingRect().left()) for p in panel.stack.plots}
     assert len(lefts) == 1
     # only the bottom plot labels its time axis
-    assert [p.time_axis.isVisible() for p in panel.plots] == [False, False, False, True]
+    assert [p.time_axis.isVisible() for p in panel.stack.plots] == [False, False, False, True]
 
 
 def test_each_plot_autoscales_on_its_own(panel, dictionary):
@@ -81,21 +81,21 @@ def test_each_plot_autoscales_on_its_own(panel, dictionary):
     _feed(panel, dictionary, 0, 2400)
     panel.refresh()
     spans = []
-    for plot, scale in zip(panel.plots, (1e-4, 1.0, 10.0, 0.01)):
+    for plot, scale in zip(panel.stack.plots, (1e-4, 1.0, 10.0, 0.01)):
         lo, hi = plot.y_range()
         assert lo < -0.9 * scale and hi > 0.9 * scale and hi - lo < 4 * scale
         spans.append(hi - lo)
     assert len(set(spans)) == 4
-    panel.set_y_range(2, -100.0, 100.0)                 # one plot fixed, the others still follow
+    panel.settings.set_y_range(2, -100.0, 100.0)                 # one plot fixed, the others still follow
     _feed(panel, dictionary, 2400, 2400, scales=(2e-4, 2.0, 20.0, 0.02))
     panel.refresh()
-    assert panel.plots[2].y_range() == pytest.approx((-100.0, 100.0))
-    assert not panel.plots[2].autoscale and panel.plots[0].autoscale
-    assert panel.plots[0].y_range()[1] >= 2e-4 * 0.99
-    assert panel.plots[1].y_range()[1] >= 2.0 * 0.99
-    assert panel.plots[3].y_range()[1] >= 0.02 * 0.99
+    assert panel.stack.plots[2].y_range() == pytest.approx((-100.0, 100.0))
+    assert not panel.stack.plots[2].autoscale and panel.stack.plots[0].autoscale
+    assert panel.stack.plots[0].y_range()[1] >= 2e-4 * 0.99
+    assert panel.stack.plots[1].y_range()[1] >= 2.0 * 0.99
+    assert panel.stack.plots[3].y_range()[1] >= 0.02 * 0.99
     # x stays linked: every plot shows the same time span
-    assert len({p.x_range() for p in panel.plots}) == 1
+    assert len({p.x_range() for p in panel.stack.plots}) == 1
 
 
 def test_heights_behave_as_a_splitter(panel, dictionary, qtbot):
@@ -128,12 +128,12 @@ def test_heights_behave_as_a_splitter(panel, dictionary, qtbot):
     assert dragged[2:] == sizes[2:]
     # a plot never gets shorter than its minimum height
     column.move_boundary(0, 10_000.0)
-    assert column.sizes()[1] == panel.plots[1].MIN_HEIGHT
+    assert column.sizes()[1] == panel.stack.plots[1].MIN_HEIGHT
     # the heights are saved and restored with the other settings, and kept on a resize
     column.setSizes([100, 300, 100, 100])
-    state = panel.state()
+    state = panel.settings.state()
     panel.set_layout(LAYOUT)
-    panel.restore_state(state)
+    panel.settings.restore_state(state)
     got = column.sizes()
     assert got[1] == max(got) and got[1] == pytest.approx(3 * got[0], rel=0.05)
     panel.resize(900, 900)
@@ -144,8 +144,8 @@ def test_heights_behave_as_a_splitter(panel, dictionary, qtbot):
 
 def test_adding_and_removing_plots_keeps_the_scene_clean(panel, dictionary):
     panel.set_layout(LAYOUT)
-    panel.remove_plot(1)
-    panel.add_plot(0)
+    panel.stack.remove_plot(1)
+    panel.stack.add_plot(0)
     panel.set_layout([["HIGH_RATE.error_angle"], ["HIGH_RATE.gyro_rate"]])
     QApplication.sendPostedEvents(None, QEvent.Type.DeferredDelete)
     import pyqtgraph as pg
@@ -153,7 +153,7 @@ def test_adding_and_removing_plots_keeps_the_scene_clean(panel, dictionary):
     assert len(items) == 2 and len(panel.column._handles) == 1
     _feed(panel, dictionary, 0, 1200)
     panel.refresh()                                    # the remaining plots still draw
-    assert len(panel.plots[1].curves["HIGH_RATE.gyro_rate"].getData()[0]) == 1200
+    assert len(panel.stack.plots[1].curves["HIGH_RATE.gyro_rate"].getData()[0]) == 1200
 
 
 def test_drop_lands_on_the_plot_under_the_mouse(panel):
@@ -168,7 +168,7 @@ def test_drop_lands_on_the_plot_under_the_mouse(panel):
     drop = QDropEvent(at, Qt.DropAction.CopyAction, mime,
                       Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier)
     panel.column.dropEvent(drop)
-    assert panel.layout_ids()[2] == ["HIGH_RATE.gyro_rate"]
+    assert panel.stack.layout_ids()[2] == ["HIGH_RATE.gyro_rate"]
 
 
 def test_cursor_follows_the_mouse_over_any_plot(panel, dictionary):
@@ -181,9 +181,9 @@ def test_cursor_follows_the_mouse_over_any_plot(panel, dictionary):
     ev = QMouseEvent(QEvent.Type.MouseMove, QPointF(pos), QPointF(vp.mapToGlobal(pos)),
                      Qt.MouseButton.NoButton, Qt.MouseButton.NoButton, Qt.KeyboardModifier.NoModifier)
     QApplication.sendEvent(vp, ev)
-    lo, hi = panel.plots[0].x_range()
-    assert all(p.cursor.isVisible() for p in panel.plots)
-    assert panel.plots[0].cursor.value() == pytest.approx((lo + hi) / 2, abs=0.05)
+    lo, hi = panel.stack.plots[0].x_range()
+    assert all(p.cursor.isVisible() for p in panel.stack.plots)
+    assert panel.stack.plots[0].cursor.value() == pytest.approx((lo + hi) / 2, abs=0.05)
     assert "error_angle" in panel.readout.text()
     QApplication.sendEvent(panel.column, QEvent(QEvent.Type.Leave))
-    assert not any(p.cursor.isVisible() for p in panel.plots)
+    assert not any(p.cursor.isVisible() for p in panel.stack.plots)

@@ -144,7 +144,7 @@ def test_drawn_curve_is_the_brute_force_envelope_as_the_window_scrolls(panel, di
     the raw samples in the window, and a spike stays visible while it is in the window."""
     store = panel.store
     feed = HighRateFeeder(dictionary, store)
-    panel.add_channel("HIGH_RATE.error_angle")
+    panel.stack.add_channel("HIGH_RATE.error_angle")
     panel.set_window_seconds(20.0)
     rng = np.random.default_rng(5)
     total = 0
@@ -161,12 +161,12 @@ def test_drawn_curve_is_the_brute_force_envelope_as_the_window_scrolls(panel, di
         if step % 7 and step < 1190:
             continue                                         # every 7th step, and the last ten
         panel.refresh()
-        x, drawn = panel.plots[0].curves["HIGH_RATE.error_angle"].getData()
+        x, drawn = panel.stack.plots[0].curves["HIGH_RATE.error_angle"].getData()
         yy = np.concatenate(ys)[-store.ring("HIGH_RATE").capacity:]
         nn = np.arange(total - len(yy), total)
         t = nn / RATE
-        lo, hi = panel.plots[0].x_range()
-        bins = max(64, int(panel.plots[0].plot_width()))
+        lo, hi = panel.stack.plots[0].x_range()
+        bins = max(64, int(panel.stack.plots[0].plot_width()))
         bx, by, per = brute_force(nn, t, yy, lo, hi, bins, before=False)
         assert np.array_equal(np.asarray(x), bx)
         assert np.array_equal(np.asarray(drawn), by)
@@ -180,7 +180,7 @@ def test_nothing_new_nothing_redrawn(panel, dictionary):
     changed (a stopped link or replay costs no redraws)."""
     feed = HighRateFeeder(dictionary, panel.store)
     feed(np.arange(2400), error_angle=np.zeros(2400))
-    panel.add_channel("HIGH_RATE.error_angle")
+    panel.stack.add_channel("HIGH_RATE.error_angle")
     calls = []
     inner = panel.refresh
     panel.refresh = lambda: (calls.append(1), inner())
@@ -194,7 +194,7 @@ def test_nothing_new_nothing_redrawn(panel, dictionary):
     panel.set_window_seconds(2.0)
     panel._on_timer()
     assert len(calls) == 3
-    assert panel.plots[0].x_range() == pytest.approx((2439 / RATE - 2.0, 2439 / RATE))
+    assert panel.stack.plots[0].x_range() == pytest.approx((2439 / RATE - 2.0, 2439 / RATE))
 
 
 def test_pyramid_fed_only_for_wide_requests_catches_up_exactly(dictionary):

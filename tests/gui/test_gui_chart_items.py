@@ -25,7 +25,7 @@ def _rect(r: QRectF) -> tuple:
 
 
 def test_lean_items_answer_as_pyqtgraph(panel, qtbot):
-    plot = panel.plots[0]
+    plot = panel.stack.plots[0]
     pi = plot.getPlotItem()
     assert isinstance(pi, LeanPlotItem) and isinstance(plot.legend, LeanLegend)
     assert _rect(pi.boundingRect()) == _rect(pg.GraphicsWidget.boundingRect(pi))
@@ -42,7 +42,7 @@ def test_lean_items_answer_as_pyqtgraph(panel, qtbot):
     panel.resize(700, 900)
     qtbot.waitUntil(lambda: vb.width() < 650, timeout=5000)
     assert _rect(vb.boundingRect()) == _rect(pg.ViewBox.boundingRect(vb))
-    for axis in (pi.getAxis("left"), plot.time_axis, panel.plots[1].time_axis):
+    for axis in (pi.getAxis("left"), plot.time_axis, panel.stack.plots[1].time_axis):
         assert _rect(axis.boundingRect()) == _rect(pg.AxisItem.boundingRect(axis))
     # with a grid an axis's rect covers the linked view's, as pyqtgraph's does
     axis = pi.getAxis("left")
@@ -52,7 +52,7 @@ def test_lean_items_answer_as_pyqtgraph(panel, qtbot):
 
 
 def test_legend_sample_click_still_hides_its_curve(panel):
-    plot = panel.plots[0]
+    plot = panel.stack.plots[0]
     sample, _ = plot.legend.items[0]
     curve = plot.curves["HIGH_RATE.error_angle"]
     assert curve.isVisible()
@@ -72,7 +72,7 @@ def test_legend_sample_click_still_hides_its_curve(panel):
 def test_curve_signals_a_listener_only_when_there_is_one(panel):
     import numpy as np
 
-    curve = panel.plots[0].curves["HIGH_RATE.error_angle"]
+    curve = panel.stack.plots[0].curves["HIGH_RATE.error_angle"]
     curve.set_points(np.arange(3.0), np.zeros(3), 0.0, 5.0)      # nobody listens: fine
     got = []
     curve.sigPlotChanged.connect(got.append)

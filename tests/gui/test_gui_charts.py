@@ -14,7 +14,7 @@ from PySide6.QtGui import QDropEvent
 from groundstation.codec import StreamDeframer
 from groundstation.gui.charts.channel_tree import ChannelTree, display_unit, format_value
 from groundstation.gui.charts.panel import StripChartPanel
-from groundstation.gui.charts.spectrum import SpectrumView, welch_psd
+from groundstation.gui.charts.spectrum import SpectrumView
 from groundstation.sim import SimulatedDevice
 from groundstation.live.display_buffers import TelemetryStore
 
@@ -45,7 +45,7 @@ def panel(qtbot, store, dictionary):
 
 
 def curve_data(panel, plot, cid):
-    x, y = panel.plots[plot].curves[cid].getData()
+    x, y = panel.stack.plots[plot].curves[cid].getData()
     if x is None:
         return np.empty(0), np.empty(0)
     return np.asarray(x), np.asarray(y)
@@ -96,19 +96,19 @@ def test_panel_draws_store_data_over_the_window(panel, store, dictionary):
     x, y = curve_data(panel, 0, "HIGH_RATE.encoder_outer")
     assert len(x) == len(snap.device_time) and np.array_equal(y, snap.values["encoder_outer"])
     assert x[-1] == snap.device_time[-1] == pytest.approx(3.0, abs=2 / RATE)
-    lo, hi = panel.plots[1].x_range()                      # X-linked: every plot
+    lo, hi = panel.stack.plots[1].x_range()                      # X-linked: every plot
     assert hi == pytest.approx(x[-1]) and hi - lo == pytest.approx(1.0)
     assert len(curve_data(panel, 1, "HIGH_RATE.current_coarse")[1]) == len(x)
-    pens = {c.opts["pen"].color().name() for c in panel.plots[0].curves.values()}
+    pens = {c.opts["pen"].color().name() for c in panel.stack.plots[0].curves.values()}
     assert len(pens) == 2
-    assert panel.plots[0].info_text() == ""                # 1200 samples: no decimation
-    assert panel.layout_ids() == [["HIGH_RATE.encoder_outer", "HIGH_RATE.reference"],
+    assert panel.stack.plots[0].info_text() == ""                # 1200 samples: no decimation
+    assert panel.stack.layout_ids() == [["HIGH_RATE.encoder_outer", "HIGH_RATE.reference"],
                                   ["HIGH_RATE.current_coarse"]]
     assert panel.stats.fps >= 1 and panel.stats.last_refresh_ms > 0
     with pytest.raises(ValueError):
         panel.set_window_seconds(601)
     with pytest.raises(ValueError):
-        panel.add_channel("HIGH_RATE.no_such_channel")
+        panel.stack.add_channel("HIGH_RATE.no_such_channel")
 
 
 def test_one_sample_spike_survives_ten_minutes(qtbot, dictionary):
@@ -124,14 +124,14 @@ def test_one_sample_spike_survives_ten_minutes(qtbot, dictionary):
     panel.resize(1000, 600)
     panel.show()
     panel.set_window_seconds(600)
-    panel.add_channel("HIGH_RATE.error_angle")
+    panel.stack.add_channel("HIGH_RATE.error_angle")
     panel.refresh()
     x, y = curve_data(panel, 0, "HIGH_RATE.error_angle")
-    assert len(y) <= 2 * panel.plots[0].plot_width() + 2          # ~2 points per pixel
+    assert len(y) <= 2 * panel.stack.plots[0].plot_width() + 2          # ~2 points per pixel
     assert y.max() == np.float32(2.5e-3)                          # exact f32 value, not averaged
     assert x[-1] - x[0] == pytest.approx(600, abs=1)
-    assert "decimated ×" in panel.plots[0].info_text()
-    assert panel.plots[0].info.isVisible()
+    assert "decimated ×" in panel.stack.plots[0].info_text()
+    assert panel.stack.plots[0].info.isVisible()
     assert panel.stats.decimation > 100
 
 
@@ -139,33 +139,33 @@ def test_gap_breaks_the_line_and_is_marked(panel, store, dictionary):
     feed = HighRateFeeder(dictionary, store)
     feed.high_rate(np.arange(0, 600), encoder_outer=np.full(600, 1e-4))
     feed.high_rate(np.arange(610, 1200), encoder_outer=np.full(590, 1e-4))   # 10 lost
-    panel.add_channel("HIGH_RATE.encoder_outer")
+    panel.stack.add_channel("HIGH_RATE.encoder_outer")
     panel.set_window_seconds(1.0)
     panel.refresh()
     x, y = curve_data(panel, 0, "HIGH_RATE.encoder_outer")
     nan = np.flatnonzero(np.isnan(y))
     assert len(nan) == 1 and x[nan[0] + 1] == pytest.approx(610 / RATE)
     assert x[nan[0] - 1] == pytest.approx(599 / RATE)            # no line across the gap
-    shown = [line for line in panel.plots[0].gap_lines if line.isVisible()]
+    shown = [line for line in panel.stack.plots[0].gap_lines if line.isVisible()]
     assert len(shown) == 1 and shown[0].value() == pytest.approx(610 / RATE)
-    assert "1 gap(s), 10 frames lost" in panel.plots[0].info_text()
+    assert "1 gap(s), 10 frames lost" in panel.stack.plots[0].info_text()
     assert np.isnan(panel.value_at("HIGH_RATE.encoder_outer", 605 / RATE))
 
 
 def test_paused_view_does_not_change_while_data_arrives(panel, store, dictionary):
     feed = HighRateFeeder(dictionary, store)
     feed.high_rate(np.arange(0, 2400), encoder_outer=np.arange(2400) * 1e-7)
-    panel.add_channel("HIGH_RATE.encoder_outer")
+    panel.stack.add_channel("HIGH_RATE.encoder_outer")
     panel.set_window_seconds(1.0)
     panel.refresh()
     panel.set_paused(True)
-    assert panel.paused and panel.pause_button.isChecked()
+    assert panel.settings.paused and panel.settings.pause_button.isChecked()
     before = curve_data(panel, 0, "HIGH_RATE.encoder_outer")
     feed.high_rate(np.arange(2400, 4800), encoder_outer=np.arange(2400, 4800) * 1e-7)
     panel.refresh()
     after = curve_data(panel, 0, "HIGH_RATE.encoder_outer")
     assert np.array_equal(before[0], after[0]) and np.array_equal(before[1], after[1])
-    panel.plots[0].getPlotItem().setXRange(1.0, 1.5, padding=0)   # zoom into the frozen data
+    panel.stack.plots[0].getPlotItem().setXRange(1.0, 1.5, padding=0)   # zoom into the frozen data
     panel.refresh()
     x, _ = curve_data(panel, 0, "HIGH_RATE.encoder_outer")
     assert x[-1] <= 2399 / RATE + 1e-9 and x[0] >= 1.0 - 2 / RATE
@@ -178,45 +178,45 @@ def test_state_round_trips_through_json(panel, store, dictionary, qtbot):
     panel.set_layout([["HIGH_RATE.encoder_outer", "HIGH_RATE.encoder_inner"],
                       ["HIGH_RATE.gyro_rate"], ["HOUSEKEEPING.temp_flexure"]])
     panel.set_window_seconds(120)
-    panel.set_timebase("host")
-    panel.set_y_range(1, -0.5, 0.5)
-    state = json.loads(json.dumps(panel.state()))
+    panel.settings.set_timebase("host")
+    panel.settings.set_y_range(1, -0.5, 0.5)
+    state = json.loads(json.dumps(panel.settings.state()))
     other = StripChartPanel(TelemetryStore(dictionary, seconds=1.0), dictionary)
     qtbot.addWidget(other)
-    other.restore_state(state)
-    assert other.layout_ids() == panel.layout_ids()
-    assert other.window_seconds == 120 and other.timebase == "host"
-    assert other.window_combo.currentData() == 120.0
-    assert [p.autoscale for p in other.plots] == [True, False, True]
-    assert other.plots[1].y_range() == pytest.approx((-0.5, 0.5))
+    other.settings.restore_state(state)
+    assert other.stack.layout_ids() == panel.stack.layout_ids()
+    assert other.settings.window_seconds == 120 and other.settings.timebase == "host"
+    assert other.settings.window_combo.currentData() == 120.0
+    assert [p.autoscale for p in other.stack.plots] == [True, False, True]
+    assert other.stack.plots[1].y_range() == pytest.approx((-0.5, 0.5))
     state["layout"][0].append("HIGH_RATE.gone_in_a_newer_protocol")
-    other.restore_state(state)                              # stale settings: dropped, no crash
-    assert other.layout_ids()[0] == ["HIGH_RATE.encoder_outer", "HIGH_RATE.encoder_inner"]
+    other.settings.restore_state(state)                              # stale settings: dropped, no crash
+    assert other.stack.layout_ids()[0] == ["HIGH_RATE.encoder_outer", "HIGH_RATE.encoder_inner"]
 
 
 def test_drop_move_and_menu(panel, store, dictionary):
-    plot = panel.plots[0]
+    plot = panel.stack.plots[0]
     mime = QMimeData()
     mime.setText("HIGH_RATE.encoder_outer\nHIGH_RATE.gyro_rate\nnot a channel\n")
     event = QDropEvent(QPointF(50, 50), Qt.DropAction.CopyAction, mime,
                        Qt.MouseButton.LeftButton, Qt.KeyboardModifier.NoModifier)
     plot.dropEvent(event)
-    assert panel.layout_ids() == [["HIGH_RATE.encoder_outer", "HIGH_RATE.gyro_rate"]]
+    assert panel.stack.layout_ids() == [["HIGH_RATE.encoder_outer", "HIGH_RATE.gyro_rate"]]
     assert plot.getPlotItem().getAxis("left").labelText == "mixed units"
-    panel.move_channel("HIGH_RATE.gyro_rate", 0, 1)                 # to a new plot
-    assert panel.layout_ids() == [["HIGH_RATE.encoder_outer"], ["HIGH_RATE.gyro_rate"]]
-    assert panel.add_channel("HIGH_RATE.encoder_inner") == 0        # joins the rad plot
-    panel._fill_menu(panel.plots[0])
-    texts = [a.text() for a in panel.plots[0].chart_menu.actions()]
+    panel.stack.move_channel("HIGH_RATE.gyro_rate", 0, 1)                 # to a new plot
+    assert panel.stack.layout_ids() == [["HIGH_RATE.encoder_outer"], ["HIGH_RATE.gyro_rate"]]
+    assert panel.stack.add_channel("HIGH_RATE.encoder_inner") == 0        # joins the rad plot
+    panel.stack._fill_menu(panel.stack.plots[0])
+    texts = [a.text() for a in panel.stack.plots[0].chart_menu.actions()]
     assert "Autoscale Y" in texts and "Remove this plot" in texts
-    sub = panel.plots[0].channel_menus["HIGH_RATE.encoder_inner"]
-    assert sub.menuAction() in panel.plots[0].chart_menu.actions()
+    sub = panel.stack.plots[0].channel_menus["HIGH_RATE.encoder_inner"]
+    assert sub.menuAction() in panel.stack.plots[0].chart_menu.actions()
     sub.actions()[0].trigger()                                      # "Move to plot 2"
-    assert panel.layout_ids() == [["HIGH_RATE.encoder_outer"],
+    assert panel.stack.layout_ids() == [["HIGH_RATE.encoder_outer"],
                                   ["HIGH_RATE.gyro_rate", "HIGH_RATE.encoder_inner"]]
-    panel.remove_plot(0)
-    assert panel.layout_ids() == [["HIGH_RATE.gyro_rate", "HIGH_RATE.encoder_inner"]]
-    assert panel.plots[0].time_axis.isVisibleTo(panel.plots[0].getPlotItem())
+    panel.stack.remove_plot(0)
+    assert panel.stack.layout_ids() == [["HIGH_RATE.gyro_rate", "HIGH_RATE.encoder_inner"]]
+    assert panel.stack.plots[0].time_axis.isVisibleTo(panel.stack.plots[0].getPlotItem())
 
 
 def test_cursor_readout_and_host_timebase(panel, store, dictionary):
@@ -226,20 +226,20 @@ def test_cursor_readout_and_host_timebase(panel, store, dictionary):
         seq = np.arange(k * 100, (k + 1) * 100)
         feed.high_rate(seq, host_time=host0 + (k + 1) * 100 / RATE + 0.005,
                        encoder_outer=seq * 1e-6)
-    panel.add_channel("HIGH_RATE.encoder_outer")
+    panel.stack.add_channel("HIGH_RATE.encoder_outer")
     panel.refresh()
     panel.set_cursor(500 / RATE)
     assert panel.value_at("HIGH_RATE.encoder_outer", 500.4 / RATE) == pytest.approx(500e-6, abs=2e-9)
     text = panel.readout.text()
     assert "encoder_outer" in text and "µrad" in text and "0.4167 s" in text
-    assert panel.plots[0].cursor.isVisible()
-    panel.set_timebase("host")
+    assert panel.stack.plots[0].cursor.isVisible()
+    panel.settings.set_timebase("host")
     panel.refresh()
     x, _ = curve_data(panel, 0, "HIGH_RATE.encoder_outer")
     # device time + the smallest host-device offset: a datagram's last frame, 5 ms late
     assert x[0] == pytest.approx(host0 + 0.005 + 1 / RATE, abs=1e-6)
     assert np.all(np.diff(x) > 0)
-    assert panel.plots[0].time_axis.host
+    assert panel.stack.plots[0].time_axis.host
 
 
 def test_axis_labels_use_si_prefixes_for_si_units(panel, store, dictionary, qtbot):
@@ -248,8 +248,8 @@ def test_axis_labels_use_si_prefixes_for_si_units(panel, store, dictionary, qtbo
     feed.high_rate(seq, error_angle=20e-6 * np.sin(seq / 50), torque_coarse_cmd=np.sin(seq / 50))
     panel.set_layout([["HIGH_RATE.error_angle"], ["HIGH_RATE.torque_coarse_cmd"]])
     panel.refresh()
-    rad_axis = panel.plots[0].getPlotItem().getAxis("left")
-    torque_axis = panel.plots[1].getPlotItem().getAxis("left")
+    rad_axis = panel.stack.plots[0].getPlotItem().getAxis("left")
+    torque_axis = panel.stack.plots[1].getPlotItem().getAxis("left")
     qtbot.waitUntil(lambda: rad_axis.labelUnitPrefix == "µ", timeout=5000)
     assert rad_axis.labelUnits == "rad" and rad_axis.autoSIPrefixScale == pytest.approx(1e6)
     assert "µrad" in rad_axis.labelString()
@@ -283,16 +283,6 @@ def test_spectrum_of_a_sine_peaks_at_its_frequency(qtbot, store, dictionary):
         view.set_channel("HIGH_RATE.nope")
 
 
-def test_welch_drops_nan_and_short_stretches():
-    t = np.arange(4096) / RATE
-    y = np.sin(2 * np.pi * 100 * t)
-    y[2000] = np.nan
-    f, p, fs = welch_psd(t, y)
-    assert fs == pytest.approx(RATE) and np.isfinite(p).all()
-    assert f[np.argmax(p)] == pytest.approx(100, abs=3)
-    assert len(welch_psd(t[:10], y[:10])[0]) == 0
-
-
 def test_redrawing_keeps_references_to_none(panel, store, dictionary, qtbot):
     """PySide6 6.12.0 on Python 3.11 drops a reference to None on every call of a void
     method (~500 per redraw here): a 30 Hz chart aborts with none_dealloc in a minute.
@@ -310,8 +300,8 @@ def test_redrawing_keeps_references_to_none(panel, store, dictionary, qtbot):
 def test_timer_redraws_only_while_visible(panel, store, dictionary, qtbot):
     feed = HighRateFeeder(dictionary, store)
     feed.high_rate(np.arange(1200), encoder_outer=np.zeros(1200))
-    panel.add_channel("HIGH_RATE.encoder_outer")
-    right_edge = lambda: panel.plots[0].x_range()[1]        # noqa: E731
+    panel.stack.add_channel("HIGH_RATE.encoder_outer")
+    right_edge = lambda: panel.stack.plots[0].x_range()[1]        # noqa: E731
     qtbot.waitUntil(lambda: right_edge() == pytest.approx(1199 / RATE), timeout=5000)
     panel.hide()
     feed.high_rate(np.arange(1200, 2400), encoder_outer=np.zeros(1200))

@@ -31,7 +31,7 @@ def connect(qtbot, win):
 def test_live_data_reaches_the_charts_and_the_status(qtbot, window):
     connect(qtbot, window)
     window.charts.refresh()
-    curves = [c for plot in window.charts.plots for c in plot.curves.values()]
+    curves = [c for plot in window.charts.stack.plots for c in plot.curves.values()]
     assert curves, "no curves on the charts"
     x, y = curves[0].getData()
     assert x is not None and len(x) > 100 and np.isfinite(y).any()
@@ -133,6 +133,6 @@ def test_layout_and_chart_channels_survive_a_restart(qtbot, dictionary, tmp_path
     first.close()
     again = MainWindow(Session(dictionary, store_seconds=10.0), settings)
     qtbot.addWidget(again)
-    assert again.charts.layout_ids() == [["HIGH_RATE.gyro_rate"], ["HOUSEKEEPING.temp_flexure"]]
-    assert again.charts.window_seconds == 60
+    assert again.charts.stack.layout_ids() == [["HIGH_RATE.gyro_rate"], ["HOUSEKEEPING.temp_flexure"]]
+    assert again.charts.settings.window_seconds == 60
     again.close()

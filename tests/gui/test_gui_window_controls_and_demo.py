@@ -207,7 +207,7 @@ def test_demo_moves_the_simulated_axis_and_esc_stops_it(qtbot, window):
     assert moved > 0.8e-3, f"the axis moved {moved:.3g} rad for a 1 mrad step"
     assert snap.values["reference"].max() - snap.values["reference"].min() > 0.9e-3
     # the charts show the channels that move
-    shown = {c for plot in window.charts.layout_ids() for c in plot}
+    shown = {c for plot in window.charts.stack.layout_ids() for c in plot}
     assert {"HIGH_RATE.encoder_inner", "HIGH_RATE.reference", "HIGH_RATE.current_fine"} <= shown
     assert "HIGH_RATE.gyro_rate" not in shown         # flat on a testbed without a gyro
     # the mode the profile played in is what the Mode box shows

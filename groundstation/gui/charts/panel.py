@@ -28,10 +28,11 @@ absolute time: the shown channels are copied once, the store keeps filling, and 
 paused the time axis can be panned and zoomed over the frozen data at full resolution
 (binned as live, `frozen_trace`).
 
-The panel's parts live in modules of their own (every name is still importable from
-here): `chart_stack` (the plots and the channels on them), `chart_settings` (window,
-timebase, pause, y ranges and their persistence), `chart_data` (what is fetched from the
-store, without Qt) and `chart_plot` (one plot).
+The panel draws; its parts are objects it owns, each with a module of its own:
+`stack` (a `PlotStack`: the plots and the channels on them, charts/stack.py) and
+`settings` (a `ChartSettings`: window, timebase, pause, y ranges and their persistence,
+charts/settings.py).  What is fetched from the store, without Qt, is in charts/data.py,
+and one plot is a `ChartPlot` (charts/plot.py).
 """
 
 from __future__ import annotations
@@ -42,17 +43,14 @@ from collections import deque
 
 import numpy as np
 from PySide6.QtCore import Qt, QTimer, Signal
-from PySide6.QtWidgets import (QCheckBox, QComboBox, QHBoxLayout, QLabel, QPushButton,
-                               QVBoxLayout, QWidget)
+from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
 
 from ...core.dictionary import Dictionary
 from ...live.display_buffers import TelemetryStore, insert_breaks
-from .channel_tree import ChannelInfo, channel_catalog, format_value
-from .data import (WINDOW_PRESETS_S, ChartStats, _Series, _Trace, _window_label, fetch_series,
-                   frozen_trace)
+from .channel_tree import channel_catalog, format_value
+from .data import ChartStats, _Series, _Trace, fetch_series, frozen_trace
 from .column import PlotColumn
 from ..common.steady_label import SteadyLabel
-from .plot import ChartPlot
 from .settings import ChartSettings
 from .stack import PlotStack
 
@@ -61,7 +59,7 @@ _EMPTY = np.empty(0)         # the data of a curve with nothing to show
 REFRESH_HZ = 30.0
 
 
-class StripChartPanel(PlotStack, ChartSettings, QWidget):
+class StripChartPanel(QWidget):
     """Stacked strip charts with a toolbar (window, timebase, pause, add plot)."""
 
     sig_layout_changed = Signal()
@@ -72,19 +70,12 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         super().__init__(parent)
         self.store = store
         self.dictionary = dictionary
-        self.catalog: dict[str, ChannelInfo] = channel_catalog(dictionary)
-        self.plots: list[ChartPlot] = []
-        self._window_s = 10.0
-        self._timebase = "device"
-        self._paused = False
-        self._frozen_end: dict[str, float] | None = None   # packet -> device time
         self._series: dict[str, _Series] = {}               # paused: the frozen data
         self._offsets: dict[str, float] = {}                # live: host − device time (s)
         self._drawn_key: tuple | None = None                # live: what the picture shows
         self._need_fetch = True
         self._render_pending = True
         self._snap_x = True            # paused: the next redraw still shows the whole window
-        self._colours: dict[str, int] = {}
         self._frame_times: deque[float] = deque()
         self._last_ms = 0.0
         self._points = 0
@@ -93,8 +84,19 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         self._info_at = -1.0                # when the toolbar's figures were last set
         self._info_paused = False
         self._newest: float | None = None   # live: absolute time of the newest sample shown
+        # all plots in one view: one paint event and one scene traversal a frame
+        self.column = PlotColumn(self)
+        self.stack = PlotStack(store, channel_catalog(dictionary), self.column, self)
+        self.settings = ChartSettings(store, self.stack, self.column, self)
         self._build_ui()
-        self.set_layout([[]])
+        self.column.sig_left.connect(lambda: self.set_cursor(None))
+        self.stack.sig_layout_changed.connect(self._on_layout_changed)
+        self.stack.sig_mouse_x.connect(self.set_cursor)
+        self.stack.sig_x_range_changed.connect(self._on_x_range_changed)
+        self.settings.sig_window_changed.connect(self._on_window_changed)
+        self.settings.sig_timebase_changed.connect(self._on_timebase_changed)
+        self.settings.sig_paused_changed.connect(self._on_paused_changed)
+        self.stack.set_layout([[]])
         self._timer = QTimer(self)
         self._timer.setInterval(int(1000 / REFRESH_HZ))
         self._timer.timeout.connect(self._on_timer)
@@ -102,38 +104,21 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
 
     # ------------------------------------------------------------------ widgets
     def _build_ui(self) -> None:
-        self.window_combo = QComboBox(self)
-        for s in WINDOW_PRESETS_S:
-            self.window_combo.addItem(_window_label(s), float(s))
-        self.window_combo.setToolTip("Length of the time window shown (1 s … 10 min)")
-        self.timebase_combo = QComboBox(self)
-        self.timebase_combo.addItem("Device time", "device")
-        self.timebase_combo.addItem("Host time", "host")
-        self.timebase_combo.setToolTip("Device: s since boot (tick/1200 Hz); "
-                                       "host: wall clock of the ground station")
-        self.pause_button = QPushButton("Pause", self)
-        self.pause_button.setCheckable(True)
-        self.pause_button.setToolTip("Freeze the charts; data keeps arriving")
         self.add_plot_button = QPushButton("Add plot", self)
-        self.autoscale_all = QCheckBox("Autoscale", self)
-        self.autoscale_all.setChecked(True)
-        self.autoscale_all.setToolTip("Autoscale the y axis of every plot "
-                                      "(per plot: right-click → Chart)")
+        self.add_plot_button.clicked.connect(lambda: self.stack.add_plot())
         self.info_label = SteadyLabel("", self)     # new figures twice a second: no relayout
         self.info_label.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        settings = self.settings
         bar = QHBoxLayout()
         bar.setContentsMargins(2, 2, 2, 2)
-        for label, w in (("Window", self.window_combo), ("Time", self.timebase_combo)):
+        for label, w in (("Window", settings.window_combo), ("Time", settings.timebase_combo)):
             bar.addWidget(QLabel(label, self))
             bar.addWidget(w)
-        bar.addWidget(self.pause_button)
-        bar.addWidget(self.autoscale_all)
+        bar.addWidget(settings.pause_button)
+        bar.addWidget(settings.autoscale_all)
         bar.addWidget(self.add_plot_button)
         bar.addStretch(1)
         bar.addWidget(self.info_label)
-        # all plots in one view: one paint event and one scene traversal a frame
-        self.column = PlotColumn(self)
-        self.column.sig_left.connect(lambda: self.set_cursor(None))
         self.readout = QLabel(self)
         self.readout.setWordWrap(True)
         self.readout.setTextFormat(Qt.TextFormat.RichText)
@@ -146,14 +131,35 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         layout.addLayout(bar)
         layout.addWidget(self.column, 1)
         layout.addWidget(self.readout)
-        self.window_combo.setCurrentIndex(WINDOW_PRESETS_S.index(10))
-        self.window_combo.currentIndexChanged.connect(
-            lambda i: self.set_window_seconds(self.window_combo.itemData(i)))
-        self.timebase_combo.currentIndexChanged.connect(
-            lambda i: self.set_timebase(self.timebase_combo.itemData(i)))
-        self.pause_button.toggled.connect(self.set_paused)
-        self.add_plot_button.clicked.connect(lambda: self.add_plot())
-        self.autoscale_all.toggled.connect(self._on_autoscale_all)
+
+    # ------------------------------------------------------------------ what the window asks
+    # The main window and the demo set up the charts through these verbs; the rest of
+    # the charts' surface is on `stack` and `settings`.
+    def set_layout(self, layout: list[list[str]]) -> None:
+        """Replace all plots: one list of channel ids per plot, top to bottom."""
+        self.stack.set_layout(layout)
+
+    def set_window_seconds(self, seconds: float) -> None:
+        self.settings.set_window_seconds(seconds)
+
+    def set_paused(self, paused: bool) -> None:
+        self.settings.set_paused(paused)
+
+    # ------------------------------------------------------------------ what needs a redraw
+    def _on_layout_changed(self) -> None:
+        self._need_fetch = self._render_pending = True
+        self.sig_layout_changed.emit()
+
+    def _on_window_changed(self) -> None:
+        self._need_fetch = self._render_pending = self._snap_x = True
+
+    def _on_timebase_changed(self) -> None:
+        self._cursor_x = None
+        self._render_pending = self._snap_x = True
+
+    def _on_paused_changed(self, paused: bool) -> None:
+        self._need_fetch = self._render_pending = self._snap_x = True
+        self.sig_paused_changed.emit(paused)
 
     # ------------------------------------------------------------------ drawing
     @property
@@ -167,9 +173,10 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
     def _on_timer(self) -> None:
         if not self.isVisible():
             return
-        if self._paused and not (self._render_pending or self._need_fetch):
+        paused = self.settings.paused
+        if paused and not (self._render_pending or self._need_fetch):
             return
-        if not self._paused and not self._render_pending and self._live_key() == self._drawn_key:
+        if not paused and not self._render_pending and self._live_key() == self._drawn_key:
             return                     # nothing arrived, nothing changed: the picture stands
         self.refresh()
 
@@ -177,25 +184,26 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         """What a live picture depends on besides the settings (which set _render_pending):
         each shown packet's ring changes, and the width in bins.  None: always redraw."""
         rings = []
-        for packet in sorted(self._wanted()):
+        for packet in sorted(self.stack.shown_by_packet()):
             ring = self.store.rings.get(packet)
             rings.append((packet, ring.changes if ring is not None else -1))
-        if not rings and self._timebase == "host":
+        if not rings and self.settings.timebase == "host":
             return None                # an empty host-time axis follows the clock
         return tuple(rings), self._bins()
 
     def _on_x_range_changed(self) -> None:
-        if self._paused:                           # re-decimate the frozen data for the new zoom
+        if self.settings.paused:                   # re-decimate the frozen data for the new zoom
             self._render_pending = True
 
     def refresh(self) -> None:
         """Redraw every plot: live from the store's min/max pyramids, or paused from the
         data frozen when pausing."""
         t0 = time.perf_counter()
-        if self._paused:
+        if self.settings.paused:
             if self._need_fetch:
-                self._series = fetch_series(self.store, self._wanted(), self._window_s,
-                                            self._frozen_end)
+                self._series = fetch_series(self.store, self.stack.shown_by_packet(),
+                                            self.settings.window_seconds,
+                                            self.settings.frozen_end)
                 self._need_fetch = False
             traces, lo, hi = self._frozen_traces()
         else:
@@ -211,45 +219,39 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         while end - self._frame_times[0] > 1.0:
             self._frame_times.popleft()
 
-    def _wanted(self) -> dict[str, set[str]]:
-        wanted: dict[str, set[str]] = {}
-        for plot in self.plots:
-            for cid in plot.curves:
-                packet, _, name = cid.partition(".")
-                wanted.setdefault(packet, set()).add(name)
-        return wanted
-
     def _bins(self) -> int:
-        return max(64, int(self.plots[0].plot_width()))
+        return max(64, int(self.stack.plots[0].plot_width()))
 
     def _place(self, origin: float, lo: float, hi: float) -> None:
         """Put absolute time `origin` at view x = 0 on every plot and show lo..hi (view x);
         the other plots follow the first through their x links."""
-        relative = not self._paused
-        for plot in self.plots:
-            plot.set_time_mode(self._timebase, relative)
+        relative = not self.settings.paused
+        for plot in self.stack.plots:
+            plot.set_time_mode(self.settings.timebase, relative)
             plot.set_origin(origin)
-        self.plots[0].set_x_view(lo, hi)
+        self.stack.plots[0].set_x_view(lo, hi)
 
     def _live_traces(self) -> tuple[dict[str, _Trace], float, float]:
         """The newest window of every packet shown, min/max per bin from the pyramids
         (only the samples that arrived since the last frame are reduced)."""
-        host = self._timebase == "host"
+        host = self.settings.timebase == "host"
+        window_s = self.settings.window_seconds
+        shown = self.stack.shown_by_packet()
         ends, offsets = [], {}
-        for packet in self._wanted():
+        for packet in shown:
             ring = self.store.rings.get(packet)
             newest = ring.newest_time() if ring is not None else None
             if newest is None:
                 continue
-            offsets[packet] = ring.host_offset(self._window_s) if host else 0.0
+            offsets[packet] = ring.host_offset(window_s) if host else 0.0
             ends.append(newest + offsets[packet])
         end = max(ends) if ends else (time.time() if host else 0.0)
-        lo, hi = end - self._window_s, end
-        self._place(end, -self._window_s, 0.0)
+        lo, hi = end - window_s, end
+        self._place(end, -window_s, 0.0)
         self._newest = end if ends else None
         bins = self._bins()
         traces = {}
-        for packet, names in self._wanted().items():
+        for packet, names in shown.items():
             if packet not in offsets:
                 continue
             off = offsets[packet]
@@ -266,21 +268,22 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
     def _frozen_traces(self) -> tuple[dict[str, _Trace], float, float]:
         """While paused: the frozen data between the plot's edges (zoom and pan freely),
         binned as the live view bins (aligned to the sample numbers)."""
+        timebase = self.settings.timebase
         if self._snap_x:
-            ends = [s.x(self._timebase)[-1] for s in self._series.values()]
-            end = max(ends) if ends else (time.time() if self._timebase == "host" else 0.0)
-            self._place(0.0, end - self._window_s, end)
+            ends = [s.x(timebase)[-1] for s in self._series.values()]
+            end = max(ends) if ends else (time.time() if timebase == "host" else 0.0)
+            self._place(0.0, end - self.settings.window_seconds, end)
             self._snap_x = False
-        lo, hi = self.plots[0].x_range()
+        lo, hi = self.stack.plots[0].x_range()
         bins = self._bins()
         traces = {}
         for packet, series in self._series.items():
-            traces[packet] = frozen_trace(series, self._timebase, lo, hi, bins)
+            traces[packet] = frozen_trace(series, timebase, lo, hi, bins)
         return traces, lo, hi
 
     def _render(self, traces: dict[str, _Trace], lo: float, hi: float) -> None:
         points, worst = 0, 1
-        for plot in self.plots:
+        for plot in self.stack.plots:
             gap_x: dict[str, np.ndarray] = {}
             gap_n: dict[str, np.ndarray] = {}
             plot_worst = 1
@@ -313,11 +316,12 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         # The figures twice a second, not every frame: a label whose text changes asks
         # the window to lay itself out again.
         now = time.perf_counter()
-        if now - self._info_at >= 0.5 or self._paused != self._info_paused:
-            self._info_at, self._info_paused = now, self._paused
+        paused = self.settings.paused
+        if now - self._info_at >= 0.5 or paused != self._info_paused:
+            self._info_at, self._info_paused = now, paused
             s = self.stats
             self.info_label.setText(f"{s.fps:.0f} fps · {s.last_refresh_ms:.1f} ms · "
-                                    + ("<b>paused</b>" if self._paused else
+                                    + ("<b>paused</b>" if paused else
                                        self._newest_text()))
 
     def _newest_text(self) -> str:
@@ -325,7 +329,7 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         t = self._newest
         if t is None:
             return "no data"
-        if self._timebase == "host":
+        if self.settings.timebase == "host":
             return "newest " + time.strftime("%H:%M:%S", time.localtime(t))
         return f"newest {t:.1f} s"
 
@@ -333,7 +337,7 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
     def set_cursor(self, x: float | None) -> None:
         """Place the read-out cursor at time x (None hides it) and fill the read-out."""
         self._cursor_x = x
-        for plot in self.plots:
+        for plot in self.stack.plots:
             plot.set_cursor(x)
         if x is None:
             return
@@ -341,16 +345,16 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
 
     def cursor_readout(self, x: float) -> str:
         """Time and every channel's value at time x (the newest sample at or before x)."""
-        if self._timebase == "host":
+        if self.settings.timebase == "host":
             t = time.strftime("%H:%M:%S", time.localtime(x)) + f".{int((x % 1) * 1000):03d}"
         else:
             t = f"{x:.4f} s"
         parts = [f"<b>t = {t}</b>"]
-        for plot in self.plots:
+        for plot in self.stack.plots:
             for cid, curve in plot.curves.items():
                 packet, _, name = cid.partition(".")
                 value = self.value_at(cid, x)
-                colour = ChartPlot.PALETTE[self._colours.get(cid, 0)]
+                colour = self.stack.colour_of(cid)
                 parts.append(f"<span style='color:{colour}'>{name}</span> "
                              f"{format_value(value, plot.units[cid])}")
         return " &nbsp;│&nbsp; ".join(parts)
@@ -362,16 +366,16 @@ class StripChartPanel(PlotStack, ChartSettings, QWidget):
         rate = self.dictionary.packet(packet).rate_hz or 1.0
         series = self._series.get(packet)
         if series is not None and name in series.values:         # paused: the frozen data
-            t = series.x(self._timebase)
+            t = series.x(self.settings.timebase)
             i = int(np.searchsorted(t, x, side="right")) - 1
             if i < 0 or x - t[i] > 1.5 / rate:
                 return math.nan
-            return float(series.values[name][i]) * self.unit_of(channel_id).scale
+            return float(series.values[name][i]) * self.stack.unit_of(channel_id).scale
         ring = self.store.rings.get(packet)
-        if self._paused or ring is None or name not in ring.channels:
+        if self.settings.paused or ring is None or name not in ring.channels:
             return math.nan
-        offset = self._offsets.get(packet, 0.0) if self._timebase == "host" else 0.0
+        offset = self._offsets.get(packet, 0.0) if self.settings.timebase == "host" else 0.0
         found = ring.sample_at(name, x - offset)
         if found is None or x - offset - found[0] > 1.5 / rate:
             return math.nan
-        return found[1] * self.unit_of(channel_id).scale
+        return found[1] * self.stack.unit_of(channel_id).scale

@@ -75,42 +75,56 @@ class _KeptBounds:
     """An axis's bounding rect, kept until its size or style changes: Qt asks for it
     several times a frame (the axes border the curves' area), and pyqtgraph works it out
     in Python from the style, the linked view and the geometry each time.  With a grid
-    the rect covers the linked view's, which can change at any time: not kept."""
+    the rect covers the linked view's, which can change at any time: not kept.
 
-    _kept_rect = None
+    The axis asks `rect(axis, compute)` from its boundingRect and calls `forget()` when
+    it is resized or restyled."""
+
+    def __init__(self) -> None:
+        self._rect = None
+
+    def rect(self, axis: pg.AxisItem, compute):
+        if axis.grid is not False:
+            return compute()
+        if self._rect is None:
+            self._rect = compute()
+        return self._rect
+
+    def forget(self) -> None:
+        self._rect = None
+
+
+class _ValueAxis(pg.AxisItem):
+    """Left axis; its bounding rect is kept and its tick labels' sizes are cached."""
+
+    def __init__(self) -> None:
+        # before the base class: its constructor already restyles and resizes the axis
+        self._bounds = _KeptBounds()
+        super().__init__(orientation="left")
+        self._text_sizes = _TextSizeCache()
 
     def boundingRect(self):
-        if self.grid is not False:
-            return super().boundingRect()
-        if self._kept_rect is None:
-            self._kept_rect = super().boundingRect()
-        return self._kept_rect
+        return self._bounds.rect(self, super().boundingRect)
 
     def resizeEvent(self, ev=None):
-        self._kept_rect = None
+        self._bounds.forget()
         super().resizeEvent(ev)
 
     def setStyle(self, **kwargs):
-        self._kept_rect = None
+        self._bounds.forget()
         super().setStyle(**kwargs)
-
-
-class _ValueAxis(_KeptBounds, pg.AxisItem):
-    """Left axis; its tick labels' sizes are cached."""
-
-    def __init__(self) -> None:
-        super().__init__(orientation="left")
-        self._text_sizes = _TextSizeCache()
 
     def generateDrawSpecs(self, p):
         return super().generateDrawSpecs(self._text_sizes.wrap(p))
 
 
-class _TimeAxis(_KeptBounds, pg.DateAxisItem):
+class _TimeAxis(pg.DateAxisItem):
     """Bottom axis: plain seconds in device time, wall-clock labels in host time, or
-    (`relative`, a live chart) seconds before the newest sample."""
+    (`relative`, a live chart) seconds before the newest sample.  Its bounding rect is
+    kept as the value axis's is."""
 
     def __init__(self) -> None:
+        self._bounds = _KeptBounds()       # before the base class, as for _ValueAxis
         super().__init__(orientation="bottom")
         self._text_sizes = _TextSizeCache()
         self.host = False
@@ -119,6 +133,17 @@ class _TimeAxis(_KeptBounds, pg.DateAxisItem):
         # No labels on the finest tick level: they never fit on a strip chart's time axis,
         # yet every one of them was measured on every scroll step.
         self.setStyle(maxTextLevel=1)
+
+    def boundingRect(self):
+        return self._bounds.rect(self, super().boundingRect)
+
+    def resizeEvent(self, ev=None):
+        self._bounds.forget()
+        super().resizeEvent(ev)
+
+    def setStyle(self, **kwargs):
+        self._bounds.forget()
+        super().setStyle(**kwargs)
 
     def generateDrawSpecs(self, p):
         return super().generateDrawSpecs(self._text_sizes.wrap(p))

@@ -1,10 +1,11 @@
 """Live power spectral density of one channel (log-log), from the telemetry store.
 
 On its own timer (a few Hz, only while visible) the view takes the last N seconds of
-the chosen channel and computes a Welch PSD (Hann window, 50 % overlap, density
-scaling, one-sided).  Sequence gaps and NaN split the record: each contiguous stretch
-long enough for one segment is averaged in, weighted by its length, so lost frames
-never get spliced into a fake step.  The text line gives the total RMS (the square
+the chosen channel and has the ground station's Welch PSD computed from it
+(`groundstation.analysis.spectra.psd_by_time`: Hann window, 50 % overlap, density
+scaling, one-sided).  Sequence gaps and NaN split the record: only segments wholly
+inside one contiguous stretch are averaged, so lost frames never get spliced into a
+fake step.  The text line gives the total RMS (the square
 root of the PSD integrated over the shown band) — the cumulative-RMS curve's end
 value — and the frequency of the largest peak.
 """
@@ -17,8 +18,8 @@ import numpy as np
 import pyqtgraph as pg
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
-from scipy import signal
 
+from ...analysis.spectra import MIN_SEGMENT, psd_by_time
 from ...core.dictionary import Dictionary
 from ...live.display_buffers import TelemetryStore
 from .channel_tree import channel_catalog, display_unit, format_value
@@ -26,56 +27,6 @@ from ..common.steady_label import SteadyLabel
 
 SECONDS_CHOICES = (1, 2, 5, 10, 30, 60)
 REFRESH_HZ = 4.0
-MIN_SEGMENT = 64
-
-
-def contiguous_runs(t: np.ndarray, y: np.ndarray, gap_times: np.ndarray,
-                    period: float) -> list[tuple[int, int]]:
-    """(start, stop) of stretches without NaN, sequence gap or time jump."""
-    n = len(y)
-    valid = np.isfinite(y)
-    new_run = np.zeros(n, dtype=bool)
-    if n:
-        new_run[0] = True
-        new_run[1:] = np.diff(t) > 1.5 * period
-    if len(gap_times):
-        idx = np.searchsorted(t, gap_times, side="left")
-        new_run[idx[idx < n]] = True
-    run_id = np.cumsum(new_run | ~valid)          # a NaN also ends a run
-    vi = np.flatnonzero(valid)
-    if not len(vi):
-        return []
-    change = np.flatnonzero(np.diff(run_id[vi])) + 1
-    starts = vi[np.r_[0, change]]
-    stops = vi[np.r_[change - 1, len(vi) - 1]] + 1
-    return list(zip(starts.tolist(), stops.tolist()))
-
-
-def welch_psd(t: np.ndarray, y: np.ndarray, gap_times: np.ndarray | None = None,
-              max_segment: int = 8192) -> tuple[np.ndarray, np.ndarray, float]:
-    """(frequencies, one-sided PSD, sample rate) over the gap-free stretches of y.
-
-    The segment length is the largest power of two giving about four segments in the
-    longest stretch (≤ max_segment, ≥ 64); shorter stretches are left out."""
-    if len(t) < MIN_SEGMENT:
-        return np.empty(0), np.empty(0), math.nan
-    period = float(np.median(np.diff(t)))
-    if not period > 0:
-        return np.empty(0), np.empty(0), math.nan
-    fs = 1.0 / period
-    runs = contiguous_runs(t, y, np.asarray(gap_times if gap_times is not None else []), period)
-    longest = max((b - a for a, b in runs), default=0)
-    if longest < MIN_SEGMENT:
-        return np.empty(0), np.empty(0), fs
-    nperseg = int(min(max_segment, max(MIN_SEGMENT, 2 ** int(math.log2(max(longest // 4, 1))))))
-    total, weight, freqs = None, 0, None
-    for a, b in runs:
-        if b - a < nperseg:
-            continue
-        freqs, pxx = signal.welch(y[a:b], fs=fs, nperseg=nperseg)
-        total = pxx * (b - a) if total is None else total + pxx * (b - a)
-        weight += b - a
-    return freqs, total / weight, fs
 
 
 def cumulative_rms(freqs: np.ndarray, psd: np.ndarray) -> np.ndarray:
@@ -184,8 +135,11 @@ class SpectrumView(QWidget):
             return
         snap = ring.snapshot([name], seconds=self.seconds)
         y = snap.values[name] * unit.scale
-        freqs, psd, _fs = welch_psd(snap.device_time, y, snap.gap_device_times)
-        self._show(freqs, psd, unit)
+        spectrum = psd_by_time(snap.device_time, y, snap.gap_device_times, units=unit.units)
+        if spectrum is None:
+            self._show(np.empty(0), np.empty(0), unit)
+        else:
+            self._show(spectrum.frequency_hz, spectrum.density, unit)
 
     def _show(self, freqs: np.ndarray, psd: np.ndarray, unit) -> None:
         keep = (freqs > 0) & (psd > 0) if len(freqs) else np.zeros(0, dtype=bool)

@@ -2,10 +2,12 @@
 removed, dropped from the channel tree), their colours, the shared time axis, and each
 plot's right-click "Chart" menu.
 
-A part of `StripChartPanel` (charts/panel.py), which provides `store`, `catalog`, `plots`,
-`column` (the one view the plots share, charts/column.py), `autoscale_all`, `_timebase`, `_paused`, `_colours`, the redraw flags,
-`sig_layout_changed` and the slots a new plot is wired to (`set_cursor`,
-`_on_x_range_changed`).
+`PlotStack` is owned by `StripChartPanel` (charts/panel.py).  It is given the telemetry
+store (which channels exist), the channel catalog (names, units, descriptions) and the
+`PlotColumn` the plots are shown in (charts/column.py).  It keeps the time mode and
+autoscale a new plot starts with, as `ChartSettings` last set them, and tells the panel
+about its plots through signals: `sig_layout_changed` after any change of the plots,
+and the plots' own `sig_mouse_x` and `sig_x_range_changed`, passed on.
 """
 
 from __future__ import annotations
@@ -13,14 +15,13 @@ from __future__ import annotations
 import logging
 from typing import TYPE_CHECKING
 
+from PySide6.QtCore import QObject, Signal
 from PySide6.QtWidgets import QMenu
 
 from .plot import ChartPlot
 from .channel_tree import ChannelInfo, DisplayUnit, display_unit
 
 if TYPE_CHECKING:
-    from PySide6.QtWidgets import QCheckBox
-
     from ...live.display_buffers import TelemetryStore
     from .column import PlotColumn
 
@@ -28,20 +29,58 @@ if TYPE_CHECKING:
 log = logging.getLogger("groundstation.gui.charts.panel")
 
 
-class PlotStack:
-    """Plots and the channels on them (the panel's `plots`, top to bottom)."""
+class PlotStack(QObject):
+    """Plots and the channels on them (`plots`, top to bottom)."""
 
-    # provided by the panel shell (StripChartPanel)
-    store: TelemetryStore
-    catalog: dict[str, ChannelInfo]
-    plots: list[ChartPlot]
-    column: PlotColumn
-    autoscale_all: QCheckBox
-    _timebase: str
-    _paused: bool
-    _colours: dict[str, int]
-    _need_fetch: bool
-    _render_pending: bool
+    sig_layout_changed = Signal()
+    sig_mouse_x = Signal(object)            # a plot's mouse time (float), None when it leaves
+    sig_x_range_changed = Signal()
+
+    def __init__(self, store: TelemetryStore, catalog: dict[str, ChannelInfo],
+                 column: PlotColumn, parent: QObject | None = None):
+        super().__init__(parent)
+        self.store = store
+        self.catalog = catalog
+        self.column = column
+        self.plots: list[ChartPlot] = []
+        self._colours: dict[str, int] = {}
+        # what a new plot starts with (ChartSettings keeps these in step with the toolbar)
+        self._timebase = "device"
+        self._relative = True
+        self._pan_x = False
+        self._autoscale = True
+
+    # ------------------------------------------------------------------ the look of every plot
+    def set_time_mode(self, timebase: str, relative: bool) -> None:
+        """Label every time axis for the timebase, relative to the newest sample or not."""
+        self._timebase, self._relative = timebase, relative
+        for plot in self.plots:
+            plot.set_time_mode(timebase, relative)
+
+    def set_pan_x(self, enabled: bool) -> None:
+        """Let the mouse pan and zoom in time (paused) or not (live)."""
+        self._pan_x = enabled
+        for plot in self.plots:
+            plot.set_mouse_x(enabled)
+
+    def set_autoscale_all(self, enabled: bool) -> None:
+        self._autoscale = enabled
+        for plot in self.plots:
+            plot.set_autoscale(enabled)
+
+    # ------------------------------------------------------------------ channels
+    def shown_by_packet(self) -> dict[str, set[str]]:
+        """The channel names shown on any plot, by packet."""
+        wanted: dict[str, set[str]] = {}
+        for plot in self.plots:
+            for cid in plot.curves:
+                packet, _, name = cid.partition(".")
+                wanted.setdefault(packet, set()).add(name)
+        return wanted
+
+    def colour_of(self, channel_id: str) -> str:
+        """The channel's curve colour (the first of the palette when it is not shown)."""
+        return ChartPlot.PALETTE[self._colours.get(channel_id, 0)]
 
     def is_valid_channel(self, channel_id: str) -> bool:
         packet, _, name = channel_id.partition(".")
@@ -173,12 +212,12 @@ class PlotStack:
 
     def _new_plot(self, index: int) -> ChartPlot:
         plot = ChartPlot(self)
-        plot.set_time_mode(self._timebase, relative=not self._paused)
+        plot.set_time_mode(self._timebase, relative=self._relative)
         plot.sig_dropped.connect(lambda ids, p=plot: self.drop_channels(ids, self.plots.index(p)))
         plot.sig_menu_about_to_show.connect(self._fill_menu)
-        plot.sig_mouse_x.connect(self.set_cursor)
-        plot.sig_x_range_changed.connect(self._on_x_range_changed)
-        plot.set_autoscale(self.autoscale_all.isChecked())
+        plot.sig_mouse_x.connect(self.sig_mouse_x)
+        plot.sig_x_range_changed.connect(self.sig_x_range_changed)
+        plot.set_autoscale(self._autoscale)
         self.plots.insert(index, plot)
         self.column.insert(index, plot)
         return plot
@@ -189,9 +228,7 @@ class PlotStack:
         for i, plot in enumerate(self.plots):
             plot.getPlotItem().setXLink(master if i else None)
             plot.time_axis.set_shown(i == len(self.plots) - 1)
-            plot.set_mouse_x(self._paused)
-        self._need_fetch = True
-        self._render_pending = True
+            plot.set_mouse_x(self._pan_x)
         self.sig_layout_changed.emit()
 
     def _fill_menu(self, plot: ChartPlot) -> None:
