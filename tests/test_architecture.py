@@ -207,3 +207,25 @@ def test_only_the_rig_module_builds_a_simulator_a_link_or_a_generator():
                 if called in RIG_BUILDERS:
                     offenders.append(f"{name}:{node.lineno}: {called}()")
     assert not offenders, offenders
+
+
+#: what builds or draws widgets: the window's model may use neither
+WIDGET_MODULES = ("PySide6.QtWidgets", "pyqtgraph")
+
+
+def test_the_window_session_imports_no_widgets():
+    """gui/session/ is the window's model (links, recording, playback, campaigns as
+    QObjects and their signals): it imports QtCore at most, never QtWidgets or
+    pyqtgraph, so it runs headless and the panels are the only views of it."""
+    offenders = []
+    for path in sorted((PKG / "gui" / "session").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            else:
+                continue
+            offenders += [f"{path.relative_to(PKG).as_posix()}:{node.lineno}: {n}" for n in names
+                          if any(n == m or n.startswith(m + ".") for m in WIDGET_MODULES)]
+    assert not offenders, offenders

@@ -7,6 +7,7 @@ import signal
 import sys
 
 from ..core.dictionary import Dictionary
+from ..core.kinds import SIMULATED_DEVICE
 
 
 def display_available() -> bool:
@@ -15,7 +16,7 @@ def display_available() -> bool:
                 or os.environ.get("QT_QPA_PLATFORM"))
 
 
-def run_gui(dictionary: Dictionary, *, connect: str | None = "sim", testbed: str | None = None,
+def run_gui(dictionary: Dictionary, *, connect: str | None = SIMULATED_DEVICE, testbed: str | None = None,
             replay: str | None = None, watch: str | None = None, publish: str | None = None,
             curve_keys: str | None = None, key_name: str = "viewer") -> int:
     """`watch`: a read-only console on the station publishing there (connect is then not
@@ -39,7 +40,7 @@ def run_gui(dictionary: Dictionary, *, connect: str | None = "sim", testbed: str
         session.watch(watch, curve_keys, key_name)
     elif replay:
         session.open_log(replay)
-    elif connect == "sim":
+    elif connect == SIMULATED_DEVICE:
         session.connect_sim(testbed)
     elif connect:
         session.connect_address(connect)

@@ -27,6 +27,7 @@ from pathlib import Path
 
 from PySide6.QtCore import QObject, QTimer, Signal
 
+from ..core.kinds import SIMULATED_DEVICE, LinkState
 from ..params import table as ptable
 from ..params.upload import UploadRecord
 from ..profiles.profile import WAVEFORMS_DIR
@@ -41,6 +42,8 @@ DEMO_TITLE = "Demo: step response on the simulator"
 CONTROLLERS_DIR = PROFILES_DIR / "controllers"
 #: chart window for the demo: the whole 5 s step and its return in view
 DEMO_WINDOW_S = 10.0
+#: link states that end a running demo (every state but connecting and up)
+LINK_DOWN = (LinkState.LOST, LinkState.FAILED, LinkState.CLOSED, LinkState.ENDED)
 
 
 @dataclass(frozen=True)
@@ -115,7 +118,7 @@ class DemoController(QObject):
         self._armed_poll.start()
         session.sig_params_uploaded.connect(self._on_uploaded)
         session.sig_params_failed.connect(self._on_params_failed)
-        session.sig_profile_done.connect(self._on_profile_done)
+        session.profiles.sig_done.connect(self._on_profile_done)
         session.sig_link_state.connect(self._on_link)
         # an ABORT sent by another path during the upload stops the demo too (the window's
         # abort() cancels first; while playing, the profile's outcome tells)
@@ -133,18 +136,18 @@ class DemoController(QObject):
     def offered(self) -> bool:
         """Shown at all: not on a rig, not on a replay."""
         s = self.session
-        return s.replay is None and s.address in ("", "sim")
+        return s.replay is None and s.address in ("", SIMULATED_DEVICE)
 
     def unavailable_reason(self) -> str:
         """Why the demo cannot start now ("" when it can)."""
         s = self.session
         if s.replay is not None:
             return "a log is being replayed: the demo runs on the simulated testbed"
-        if s.address not in ("", "sim"):
+        if s.address not in ("", SIMULATED_DEVICE):
             return (f"connected to {s.address}: the demo runs only on the simulated testbed "
                     "(it uploads a controller table and arms the drives)")
         client = s.client
-        if client is None or client.link_state != "up":
+        if client is None or client.link_state != LinkState.UP:
             return "connect to the simulated testbed first (Device ▸ Connect, F5)"
         if plan_for(s.testbed) is None:
             name = Path(s.testbed).name if s.testbed else DEFAULT_TESTBED.name
@@ -156,7 +159,7 @@ class DemoController(QObject):
             return "the drives are armed: disarm first (Ctrl+D); the table changes only disarmed"
         if self._upload_pending:
             return "the last parameter upload is still finishing"
-        if s.profile_playing:
+        if s.profiles.playing:
             return "a profile is playing"
         if s.campaign.running:
             return "a campaign is running: it owns the device until it ends"
@@ -255,9 +258,9 @@ class DemoController(QObject):
             self.update_availability()          # a profile of someone else's ended
 
     def _on_link(self, state: str, message: str) -> None:
-        if state == "up":
+        if state == LinkState.UP:
             self._upload_pending = False         # an old link's upload died with it
-        elif state in ("lost", "failed", "closed", "ended") and self.running:
+        elif state in LINK_DOWN and self.running:
             self._fail(f"link {state}{': ' + message if message else ''}")
             return
         self.update_availability()

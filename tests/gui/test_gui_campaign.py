@@ -188,7 +188,7 @@ def test_profile_preview_play_and_abort(qtbot, window, tmp_path):
     assert status == "aborted", text
     assert "ABORTED" in panel.status.text()
     qtbot.waitUntil(lambda: ring.latest("armed") == 0, timeout=10000)
-    assert not session.profile_playing and panel.play_button.isEnabled()
+    assert not session.profiles.playing and panel.play_button.isEnabled()
 
 
 def test_a_campaign_drives_the_simulators_generator_beside_the_panel(qtbot, window, tmp_path):

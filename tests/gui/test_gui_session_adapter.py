@@ -68,7 +68,7 @@ def test_without_a_link_the_verbs_say_not_connected(qtbot, window):
     assert failed.args == ["not connected"]
     profile = load_profile(WAVEFORMS / "pluck_fine_csv.toml", session.d)
     assert "not connected" in session.play_profile(profile, "OPEN_LOOP")
-    assert not session.profile_playing
+    assert not session.profiles.playing
 
 
 def test_a_design_upload_from_the_panel_goes_through_the_station(qtbot, window, tmp_path):
@@ -160,14 +160,14 @@ def test_the_typed_signals_carry_typed_payloads(qtbot, window):
     steps: list[str] = []
     uploads: list[float] = []
     played: list[tuple[int, int]] = []
-    session.sig_profile_step.connect(steps.append)
-    session.sig_profile_upload.connect(uploads.append)
-    session.sig_profile_progress.connect(lambda n, count: played.append((n, count)))
+    session.profiles.sig_step.connect(steps.append)
+    session.profiles.sig_upload.connect(uploads.append)
+    session.profiles.sig_progress.connect(lambda n, count: played.append((n, count)))
     assert window.profiles.set_file(WAVEFORMS / "pluck_fine_csv.toml")
     window.profiles.mode.setCurrentText("OPEN_LOOP")
-    with qtbot.waitSignal(session.sig_profile_done, timeout=30000) as done:
+    with qtbot.waitSignal(session.profiles.sig_done, timeout=30000) as done:
         assert window.profiles.play(confirm=False) is None
-        assert session.profile_playing
+        assert session.profiles.playing
     outcome = done.args[0]
     assert isinstance(outcome, PlayOutcome) and outcome.status in PLAY_STATUSES
     assert outcome.status == "completed" and outcome.completed, outcome.text
@@ -177,6 +177,6 @@ def test_the_typed_signals_carry_typed_payloads(qtbot, window):
     assert "uploading" in steps and "playing" in steps
     assert uploads and uploads[-1] == pytest.approx(1.0)
     assert played and all(isinstance(n, int) and count == profile.sample_count for n, count in played)
-    qtbot.waitUntil(lambda: not session.profile_playing, timeout=5000)
+    qtbot.waitUntil(lambda: not session.profiles.playing, timeout=5000)
     with pytest.raises(ValueError):
         PlayOutcome("finished", "not a status")

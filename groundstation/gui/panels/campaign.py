@@ -27,6 +27,7 @@ from PySide6.QtWidgets import (QAbstractItemView, QComboBox, QDoubleSpinBox, QFi
 
 from ...campaign import Campaign, StepResult, load_campaign
 from ...core.errors import GroundStationError
+from ...core.kinds import SIMULATED_DEVICE
 from ...plant.testbed import PROFILES_DIR
 from ..session.campaign_runner import CampaignOutcome
 from ..common.file_combo import FilePicker
@@ -82,7 +83,7 @@ class CampaignPanel(QWidget):
         c.sig_failed.connect(self._on_failed)
         session.sig_link_state.connect(lambda *_: self._update_readiness())
         session.sig_source.connect(lambda *_: self._update_readiness())
-        session.sig_profile_done.connect(lambda _outcome: self._update_readiness())
+        session.profiles.sig_done.connect(lambda _outcome: self._update_readiness())
         self._update_readiness()
 
     # ------------------------------------------------------------------ layout
@@ -307,7 +308,7 @@ class CampaignPanel(QWidget):
         # the simulator can be (re)started with the campaign's testbed from here
         s = self.session
         offer = bool(reason) and s.replay is None and (
-            s.client is None or (s.address == "sim" and self.ctl.session_testbed()
+            s.client is None or (s.address == SIMULATED_DEVICE and self.ctl.session_testbed()
                                  != c.testbed.resolve()))
         self.connect_button.setText(f"Connect the simulator ({c.testbed.name})")
         self.connect_button.setVisible(offer)

@@ -9,7 +9,8 @@ power spectral density on log axes.
 
 The widget does no I/O and no numerics: `groundstation.profiles` reads, checks,
 summarises and previews the profile; the Session plays it on its worker thread
-(`Session.play_profile`, the Station's verb) and answers with its sig_profile_* signals.
+(`Session.play_profile`, the Station's verb) and its ProfilePlayback (`session.profiles`)
+answers with its sig_* signals.
 Esc (MainWindow.abort) stops it.
 """
 
@@ -27,6 +28,7 @@ from PySide6.QtWidgets import (QComboBox, QGridLayout, QGroupBox, QHBoxLayout, Q
 
 from ...core.dictionary import Dictionary
 from ...core.errors import GroundStationError
+from ...core.kinds import LinkState
 from ...profiles import (TARGETS, Profile, ProfileCheck, ProfileSummary, check_profile,
                          default_mode, load_profile, preview, summarise)
 from ...profiles.profile import WAVEFORMS_DIR
@@ -69,10 +71,11 @@ class ProfilePanel(QWidget):
         #: tests answer the confirmation dialog through this (None: ask the operator)
         self.confirm_override: bool | None = None
         self._build()
-        session.sig_profile_step.connect(self._on_step)
-        session.sig_profile_upload.connect(self._on_upload)
-        session.sig_profile_progress.connect(self._on_progress)
-        session.sig_profile_done.connect(self._on_done)
+        playback = session.profiles
+        playback.sig_step.connect(self._on_step)
+        playback.sig_upload.connect(self._on_upload)
+        playback.sig_progress.connect(self._on_progress)
+        playback.sig_done.connect(self._on_done)
         session.sig_link_state.connect(lambda *_: self._update_buttons())
         session.sig_source.connect(lambda *_: self._update_buttons())
         session.campaign.sig_started.connect(lambda *_: self._update_buttons(campaign=True))
@@ -382,17 +385,18 @@ class ProfilePanel(QWidget):
     def _update_buttons(self, campaign: bool | None = None) -> None:
         s = self.session
         running_campaign = s.campaign.running if campaign is None else campaign
-        connected = s.replay is None and s.client is not None and s.client.link_state == "up"
+        connected = (s.replay is None and s.client is not None
+                     and s.client.link_state == LinkState.UP)
         ok = self.profile is not None and self.check is not None and self.check.ok
-        self.play_button.setEnabled(ok and connected and not s.profile_playing
-                                    and not running_campaign)
-        why = ("" if ok and connected and not s.profile_playing and not running_campaign else
+        playing = s.profiles.playing
+        self.play_button.setEnabled(ok and connected and not playing and not running_campaign)
+        why = ("" if ok and connected and not playing and not running_campaign else
                "load a profile the device accepts" if not ok else
                "connect to the device first" if not connected else
-               "a profile is playing" if s.profile_playing else "a campaign is running")
+               "a profile is playing" if playing else "a campaign is running")
         self.play_button.setToolTip(why or "upload (CRC-checked), set the mode, arm, play "
                                     "sample-exact to the end, disarm; journaled in the recording")
-        self.mode.setEnabled(ok and not s.profile_playing)
+        self.mode.setEnabled(ok and not playing)
 
     def _say(self, text: str, bad: bool = False, style: str | None = None) -> None:
         self.status.setText(text)

@@ -16,14 +16,17 @@ from PySide6.QtWidgets import (QAbstractScrollArea, QCheckBox, QComboBox, QFormL
                                QMessageBox, QPushButton, QTableWidget,
                                QTableWidgetItem, QVBoxLayout, QWidget)
 
+from ...core.kinds import SIMULATED_DEVICE, LinkState
 from ...link import format_snapshot
 from ...live.limits import GREEN, RED, YELLOW
 from ..common.steady_label import SteadyLabel
 from ..session.session import Session
 
-LAMP = {"up": "#2e7d32", "connecting": "#f9a825", "lost": "#c62828", "failed": "#c62828",
-        "ended": "#c62828",
-        "closed": "#616161", "replay": "#1565c0"}
+#: the link lamp's colour per link state
+LAMP = {LinkState.UP: "#2e7d32", LinkState.CONNECTING: "#f9a825", LinkState.LOST: "#c62828",
+        LinkState.FAILED: "#c62828", LinkState.ENDED: "#c62828", LinkState.CLOSED: "#616161"}
+#: the link states the health line shows in red (ended: another station took the session)
+LINK_FAULTS = (LinkState.LOST, LinkState.FAILED, LinkState.ENDED)
 STATE_COLOURS = {GREEN: QColor("#2e7d32"), YELLOW: QColor("#f9a825"), RED: QColor("#c62828")}
 
 
@@ -57,7 +60,7 @@ class ConnectionBar(QWidget):
         self.baud.addItems(["2000000", "3000000", "921600", "115200"])
         self.connect_button = QPushButton("Connect")
         self.lamp = QLabel()
-        self.lamp.setStyleSheet(lamp_style(LAMP["closed"]))
+        self.lamp.setStyleSheet(lamp_style(LAMP[LinkState.CLOSED]))
         # The text changes twice a second: a fixed width (the usual figures fit; the
         # tooltip has them all), so it never sets the window's minimum width and a new
         # text does not lay the window out again.
@@ -110,22 +113,22 @@ class ConnectionBar(QWidget):
                 return
 
     def _link_state(self, state: str, message: str) -> None:
-        if state == "connecting" and self.session.address == "sim":
+        if state == LinkState.CONNECTING and self.session.address == SIMULATED_DEVICE:
             self._show_testbed(self.session.testbed)
-        self.connect_button.setText("Connect" if state == "closed" else "Disconnect")
+        self.connect_button.setText("Connect" if state == LinkState.CLOSED else "Disconnect")
         self.lamp.setStyleSheet(lamp_style(LAMP.get(state, "#616161")))
         self.lamp.setToolTip(f"{state}: {message}")
-        if state in ("lost", "failed", "ended"):      # ended: another station took the session
+        if state in LINK_FAULTS:
             self.health.setText(f"LINK {state.upper()}: {message}")
             self.health.setToolTip(f"LINK {state.upper()}: {message}")
             self.health.setStyleSheet("color:#c62828; font-weight:bold;")
-        elif state == "closed":
+        elif state == LinkState.CLOSED:
             self.health.setText("not connected")
             self.health.setStyleSheet("")
 
     def _update_health(self) -> None:
         src = self.session.source
-        if src is None or getattr(src, "link_state", "") not in ("up",):
+        if src is None or getattr(src, "link_state", "") != LinkState.UP:
             return
         snap = src.stats.snapshot()
         if self.health.styleSheet():

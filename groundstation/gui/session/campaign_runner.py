@@ -37,6 +37,7 @@ from PySide6.QtCore import QObject, Signal
 from ...campaign import ACTIONS, Campaign, CampaignReport, CampaignRunner, Step, StepResult
 from ...station.clock import ScriptAborted
 from ...core.errors import GroundStationError
+from ...core.kinds import SIMULATED_DEVICE, LinkState
 from ...station.station import Station as Testbed
 from ...plant.testbed import DEFAULT_TESTBED, load_testbed
 
@@ -96,8 +97,8 @@ class CampaignController(QObject):
     sig_failed = Signal(str)                     # could not start (nothing was run)
 
     def __init__(self, session, parent: QObject | None = None):
-        """`session`: the GUI Session (client, testbed, fg_resource, generator,
-        param_history, sig_event)."""
+        """`session`: the GUI Session (client, replay, address, testbed, fg_resource,
+        generator, profiles, param_history)."""
         super().__init__(parent)
         self.session = session
         self.campaign: Campaign | None = None
@@ -123,14 +124,14 @@ class CampaignController(QObject):
         client = self.session.client
         if self.session.replay is not None:
             return "a log is being replayed: connect to the device first", ""
-        if client is None or client.link_state != "up":
+        if client is None or client.link_state != LinkState.UP:
             return "not connected: connect to the device (or the simulated testbed) first", ""
         if self.running:
             return "a campaign is already running", ""
-        if getattr(self.session, "profile_playing", False):
+        if self.session.profiles.playing:
             return "a profile is playing: wait for it to end or abort it", ""
         note = ""
-        if self.session.address == "sim":
+        if self.session.address == SIMULATED_DEVICE:
             if self.session_testbed() != campaign.testbed.resolve():
                 return (f"the simulator runs {self.session_testbed().name}, the campaign is "
                         f"written for {campaign.testbed.name}: connect the simulated testbed "
@@ -155,7 +156,7 @@ class CampaignController(QObject):
         """What the campaign's Testbed uses as its generator (see the module docstring):
         the simulator's resource, the Generator panel's open driver, or None."""
         sim = self.session.fg_resource
-        if sim and self.session.address == "sim":
+        if sim and self.session.address == SIMULATED_DEVICE:
             return sim
         gen = self.session.generator
         if gen.is_open:

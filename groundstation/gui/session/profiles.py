@@ -1,16 +1,27 @@
-"""The session's profile playback: a profile uploaded (verified), armed, played to its
-end and disarmed on a worker thread through the Station, with the operator's abort
-ending it at once.  A mixin of gui/session.Session, kept apart because it is a job of
-its own: it uses the session's link, Station, workers, abort flag and signals."""
+"""Profile playback for the window's session: a profile uploaded (verified), armed,
+played to its end and disarmed on a worker thread through the Station, with the
+operator's abort ending it at once.
+
+`ProfilePlayback` is owned by the Session (`session.profiles`): the Session decides
+whether its link can take a profile now and hands over its Station; the playback runs
+one profile at a time and reports each stage as its own signals."""
 
 from __future__ import annotations
 
 import logging
+import threading
 import time
+from typing import TYPE_CHECKING
+
+from PySide6.QtCore import QObject, Signal
 
 from ...core.errors import GroundStationError
 from ...profiles import Profile
-from .events import PlayOutcome
+from .commands import StartThread
+from .events import EventSink, PlayOutcome
+
+if TYPE_CHECKING:
+    from ...station.station import Station
 
 log = logging.getLogger(__name__)
 
@@ -23,44 +34,62 @@ class ProfileAborted(GroundStationError):
     """The operator aborted a profile that was being uploaded or played."""
 
 
-class ProfilePlaybackMixin:
+class ProfilePlayback(QObject):
+    """Plays one profile at a time on a Station (worker thread): steps, upload, progress,
+    then once sig_done with a PlayOutcome."""
+
+    sig_step = Signal(str)                   # "uploading", "mode RELATIVE", "playing", ...
+    sig_upload = Signal(float)               # fraction of the profile uploaded
+    sig_progress = Signal(int, int)          # samples played, sample count
+    sig_done = Signal(object)                # PlayOutcome (session/events.py)
+
+    def __init__(self, start_thread: StartThread, report: EventSink,
+                 parent: QObject | None = None):
+        super().__init__(parent)
+        self._start_thread = start_thread
+        self._report = report
+        # written by the worker when the playback ends, read on the GUI thread
+        self._playing = False
+        self._abort = threading.Event()
+
     @property
-    def profile_playing(self) -> bool:
+    def playing(self) -> bool:
+        """A profile is being uploaded or played (until just before sig_done)."""
         return self._playing
 
-    def play_profile(self, profile: Profile, mode: str | None = None) -> str | None:
-        """Upload (verified), arm, play to the end and disarm a profile on a worker thread
-        (Station.play_profile), journaled into the recording if one runs.  Returns why
-        not (nothing sent), else None; progress arrives as sig_profile_step /
-        sig_profile_upload / sig_profile_progress, then once sig_profile_done with a
-        PlayOutcome.  Abort ends it at once."""
-        client, station = self.client, self.station
-        if (self.replay is not None or client is None or station is None
-                or client.link_state != "up"):
-            return "not connected: connect to the device first"
+    def abort(self) -> None:
+        """End a playing profile's wait: it reports "aborted".  The device's own ABORT is
+        the Session's to send; this only stops the player waiting for the profile's end
+        (after PROFILE_ABORT_GRACE_S it makes the device safe itself)."""
+        self._abort.set()
+
+    def play(self, station: Station, profile: Profile, mode: str | None = None) -> str | None:
+        """Upload (verified), arm, play to the end and disarm `profile` on `station`
+        (Station.play_profile, journaled into the recording if one runs) on a worker
+        thread.  Returns why not (nothing sent), else None.  The caller has checked that
+        the link is up and nothing else owns the device."""
         if self._playing:
             return "a profile is already playing"
-        if self.campaign.running:
-            return "a campaign is running: it owns the device until it ends"
         self._playing = True
-        self._play_abort.clear()
-        self.sig_event.emit("INFO", "profile", f"playing {profile.name} ({profile.duration:g} s, "
-                                               f"{profile.target}) in {mode or 'its default mode'}")
+        self._abort.clear()
+        self._report("INFO", "profile", f"playing {profile.name} ({profile.duration:g} s, "
+                                        f"{profile.target}) in {mode or 'its default mode'}")
+        self._start_thread(lambda: self._run(station, profile, mode), "gs-profile-play")
+        return None
 
+    def _run(self, station: Station, profile: Profile, mode: str | None) -> None:
+        """Worker thread: the whole playback, ending in one sig_done."""
         aborted_at: list[float] = []
 
-        def check_abort() -> None:
-            if self._play_abort.is_set():
+        def on_step(text: str) -> None:
+            if self._abort.is_set():        # between upload, mode, arm and start
                 raise ProfileAborted(f"{profile.name}: aborted by the operator before playback "
                                      f"started; the device was made safe")
-
-        def on_step(text: str) -> None:
-            check_abort()                   # between upload, mode, arm and start
-            self.sig_profile_step.emit(text)
+            self.sig_step.emit(text)
 
         def progress(played: int, count: int) -> None:
-            self.sig_profile_progress.emit(played, count)
-            if self._play_abort.is_set():
+            self.sig_progress.emit(played, count)
+            if self._abort.is_set():
                 # the device's ABORT ends playback within a period, and the player sees it
                 # in the telemetry; should that not come, stop waiting and make safe here
                 if not aborted_at:
@@ -69,36 +98,33 @@ class ProfilePlaybackMixin:
                     raise ProfileAborted(f"{profile.name}: aborted by the operator after {played} "
                                          f"of {count} samples; the device was made safe")
 
-        def work() -> None:
-            try:
-                result = station.play_profile(
-                    profile, mode, progress=progress, on_step=on_step,
-                    upload_progress=lambda _step, f: self.sig_profile_upload.emit(f))
-            except ProfileAborted as exc:
-                outcome = PlayOutcome("aborted", str(exc))
-            except GroundStationError as exc:   # ScriptError too: a device fault, not open
-                outcome = PlayOutcome("aborted" if self._play_abort.is_set() else "failed", str(exc))
-            except Exception as exc:        # a bug: the player made the device safe; say so
-                log.exception("playing %s", profile.name)
-                outcome = PlayOutcome("failed", f"{type(exc).__name__}: {exc}")
+        try:
+            result = station.play_profile(
+                profile, mode, progress=progress, on_step=on_step,
+                upload_progress=lambda _step, f: self.sig_upload.emit(f))
+        except ProfileAborted as exc:
+            outcome = PlayOutcome("aborted", str(exc))
+        except GroundStationError as exc:   # ScriptError too: a device fault, not open
+            outcome = PlayOutcome("aborted" if self._abort.is_set() else "failed", str(exc))
+        except Exception as exc:            # a bug: the player made the device safe; say so
+            log.exception("playing %s", profile.name)
+            outcome = PlayOutcome("failed", f"{type(exc).__name__}: {exc}")
+        else:
+            if result.completed:
+                outcome = PlayOutcome("completed", result.text(), result)
+            elif self._abort.is_set():
+                # the device ends an aborted profile "disarmed" (its first event): the
+                # operator's abort is the cause
+                outcome = PlayOutcome("aborted", f"aborted by the operator: {result.text()}",
+                                      result)
             else:
-                if result.completed:
-                    outcome = PlayOutcome("completed", result.text(), result)
-                elif self._play_abort.is_set():
-                    # the device ends an aborted profile "disarmed" (its first event):
-                    # the operator's abort is the cause
-                    outcome = PlayOutcome("aborted", f"aborted by the operator: {result.text()}",
-                                          result)
-                else:
-                    outcome = PlayOutcome("ended early", result.text(), result)
-            finally:
-                self._playing = False
-            self.sig_event.emit("INFO" if outcome.status == "completed" else
-                                "WARNING" if outcome.status == "aborted" else "ERROR",
-                                "profile", f"{profile.name}: {outcome.status}: {outcome.text}")
-            self.sig_profile_done.emit(outcome)
-        self._worker(work, "gs-profile-play")
-        return None
+                outcome = PlayOutcome("ended early", result.text(), result)
+        finally:
+            self._playing = False
+        self._report("INFO" if outcome.status == "completed" else
+                     "WARNING" if outcome.status == "aborted" else "ERROR",
+                     "profile", f"{profile.name}: {outcome.status}: {outcome.text}")
+        self.sig_done.emit(outcome)
 
 
-__all__ = ["PROFILE_ABORT_GRACE_S", "ProfileAborted", "ProfilePlaybackMixin"]
+__all__ = ["PROFILE_ABORT_GRACE_S", "ProfileAborted", "ProfilePlayback"]

@@ -1,7 +1,11 @@
 """The GUI's session controller: owns the link (or the replay), the simulator child
 process (with its function generator), the recorder, the function-generator controller
 and the campaign controller (campaigns run on this session's link), and turns thread
-callbacks into Qt signals.
+callbacks into Qt signals.  Two jobs of their own are collaborators it owns, each built
+with what it needs: `profiles` (ProfilePlayback: a profile played through the Station,
+with its own sig_* signals) and `consoles` (Consoles: publishing this link for
+read-only consoles, or watching one read-only).  No widgets here: this is the window's
+model, the panels connect to its signals.
 
 The parameter table and command profiles go through the Station verbs, exactly as the
 CLI and scripts do: while the link is up a `Station` is attached to it (`self.station`,
@@ -27,13 +31,13 @@ from PySide6.QtCore import QObject, QTimer, Signal
 
 from ...core.dictionary import Dictionary
 from ...core.errors import GroundStationError
-from ...core.kinds import SIMULATED_DEVICE
+from ...core.kinds import SIMULATED_DEVICE, LinkState
 from ...link import DeviceClient
 from ...logs import Recorder, ReplaySource
 from ...logs.live import attach_recorder
 from ...logs.summary import event_markers
-from .consoles import ConsoleMixin
-from .profiles import ProfilePlaybackMixin
+from .consoles import Consoles
+from .profiles import ProfilePlayback
 from ...live.limits import LimitMonitor
 from ...params.upload import ParameterHistory
 from ...station.recording import device_record
@@ -44,6 +48,7 @@ from ...live.display_buffers import TelemetryStore
 from .campaign_runner import CampaignController
 from ..generator.controller import GeneratorController
 from .commands import CommandQueue
+from ...profiles import Profile
 
 log = logging.getLogger(__name__)
 
@@ -53,7 +58,7 @@ log = logging.getLogger(__name__)
 TELEMETRY_BATCH_S = 0.025
 
 
-class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
+class Session(QObject):
     sig_link_state = Signal(str, str)            # state, message
     sig_event = Signal(str, str, str)            # level, source, text
     sig_command = Signal(str, str, str, str)     # command, sequence (u32, as text), stage, reason
@@ -66,11 +71,6 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
     sig_params_uploaded = Signal(object)         # UploadRecord: a table verified on the device
     sig_params_progress = Signal(str, float)     # step ("upload", "read back"), fraction done
     sig_params_failed = Signal(str)              # why a read, upload or rollback failed
-    # profile playback (worker thread): steps, upload, progress, then once sig_profile_done
-    sig_profile_step = Signal(str)               # "uploading", "mode RELATIVE", "playing", ...
-    sig_profile_upload = Signal(float)           # fraction of the profile uploaded
-    sig_profile_progress = Signal(int, int)      # samples played, sample count
-    sig_profile_done = Signal(object)            # PlayOutcome (session/events.py)
 
     def __init__(self, dictionary: Dictionary, store_seconds: float = 600.0, parent=None,
                  param_history: str | Path | None = None):
@@ -85,11 +85,6 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         self.station: Station | None = None
         self.replay: ReplaySource | None = None
         self.sim: LocalSimulator | None = None
-        #: the endpoint this window watches read-only (fanout.WatchClient as self.client;
-        #: no Station: the verbs say "not connected"), or None
-        self.watching: str | None = None
-        #: fanout.Publisher: what this window's link receives, for read-only consoles
-        self.publisher = None
         self.recorder: Recorder | None = None
         self._detach_recorder = None           # undoes attach_recorder on the current link
         self.address: str = ""
@@ -121,8 +116,11 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         self.generator.sig_refused.connect(
             lambda setting, text: self.sig_event.emit("WARNING", "generator", f"refused: {text}"))
         self.generator.sig_info.connect(lambda text: self.sig_event.emit("INFO", "generator", text))
-        self._playing = False
-        self._play_abort = threading.Event()
+        #: profile playback on this session's Station (its own sig_step ... sig_done)
+        self.profiles = ProfilePlayback(self._worker, self.sig_event.emit, parent=self)
+        #: the fan-out: this link published, or another station watched read-only (then a
+        #: fanout.WatchClient is self.client, with no Station: the verbs say "not connected")
+        self.consoles = Consoles(dictionary, self.sig_event.emit, self._worker)
         #: campaigns on this session's link (Abort, disconnecting and closing stop them)
         self.campaign = CampaignController(self, parent=self)
         self.campaign.sig_log.connect(lambda text: self.sig_event.emit("INFO", "campaign", text))
@@ -139,7 +137,7 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
 
     def connect_sim(self, testbed: str | None = None) -> None:
         self.testbed = testbed
-        self._start_link("sim")
+        self._start_link(SIMULATED_DEVICE)
 
     def connect_address(self, address: str) -> None:
         self._start_link(address)
@@ -154,14 +152,14 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         self.close_replay()
         self.disconnect_link()
         # leaving the simulator behind, or asking for another testbed than it runs
-        if self.sim is not None and (address != "sim" or self._sim_testbed != self.testbed):
+        if self.sim is not None and (address != SIMULATED_DEVICE or self._sim_testbed != self.testbed):
             self.generator.forget_simulator()          # its outputs off while it can answer
             self.sim.stop()
             self.sim = None
         self.address = address
         self._want_connected = True
         self._attempt = 0
-        self.sig_link_state.emit("connecting", address)
+        self.sig_link_state.emit(LinkState.CONNECTING, address)
         generation = self._link_generation
         self._worker(lambda: self._connect_worker(generation), "gs-connect")
 
@@ -185,7 +183,7 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
     def _connect_worker(self, generation: int) -> None:
         try:
             address = self.address
-            if address == "sim":
+            if address == SIMULATED_DEVICE:
                 if self.sim is None or self.sim.gone():
                     # with its function generator, so the GUI always has one to drive
                     sim = start_simulator(self.testbed, speed=self.sim_speed, generator=True)
@@ -210,21 +208,20 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
                 client.close()
                 raise
             self.client, self.station = client, station
-            if self.publisher is not None:
-                self.publisher.attach(client, address)
+            self.consoles.link_up(client, address)
             if self.recorder is not None and self.recorder.state == "recording":
                 self._detach_recorder = attach_recorder(client, self.recorder)   # a reconnect keeps recording
             self._attempt = 0
             self.sig_source.emit("live", address)
-            self.sig_link_state.emit("up", address)
+            self.sig_link_state.emit(LinkState.UP, address)
             self.sig_event.emit("INFO", "link", f"connected to {address}")
         except GroundStationError as exc:
-            self._link_state_of(generation, "failed", str(exc))
+            self._link_state_of(generation, LinkState.FAILED, str(exc))
 
     def disconnect_link(self) -> None:
         """Close the session (the device disarms), switch the generator's outputs off
         and stop the simulator child."""
-        self._play_abort.set()
+        self.profiles.abort()
         self.campaign.abort()                       # its rig made safe while the link is up
         self.generator.abort()
         self._want_connected = False
@@ -232,13 +229,11 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         self._link_generation += 1                  # what the old link says from now on is ignored
         self._close_station()
         client, self.client = self.client, None
-        self.watching = None
-        if self.publisher is not None:
-            self.publisher.detach()
+        self.consoles.link_down()
         if client is not None:
             self._worker(client.close, "gs-disconnect")
-            self.sig_link_state.emit("closed", "")
-        if self.sim is not None and self.address != "sim":
+            self.sig_link_state.emit(LinkState.CLOSED, "")
+        if self.sim is not None and self.address != SIMULATED_DEVICE:
             self.generator.forget_simulator()
             self.sim.stop()
             self.sim = None
@@ -249,8 +244,9 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         reach are being torn down."""
         self.blockSignals(True)
         self.campaign.blockSignals(True)
+        self.profiles.blockSignals(True)
         self._closing = True
-        self._play_abort.set()
+        self.profiles.abort()
         # first: a campaign makes the rig safe (its generator session too) while the link
         # and the simulator still answer
         self.campaign.stop()
@@ -271,17 +267,15 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         if self.sim is not None:
             self.sim.stop()
             self.sim = None
-        if self.publisher is not None:
-            self.publisher.close()
-            self.publisher = None
+        self.consoles.close()
         self.close_replay()
 
     def _on_link_state(self, state: str, message: str) -> None:
-        if state == "lost":
+        if state == LinkState.LOST:
             self.sig_event.emit("ERROR", "link", f"link lost: {message}")
-        if state == "ended":       # taken over: not reconnected, the operator decides
+        if state == LinkState.ENDED:       # taken over: not reconnected, the operator decides
             self.sig_event.emit("ERROR", "link", message)
-        if state in ("lost", "failed") and self._want_connected and self.replay is None:
+        if state in (LinkState.LOST, LinkState.FAILED) and self._want_connected and self.replay is None:
             delay = RECONNECT_DELAYS_S[min(self._attempt, len(RECONNECT_DELAYS_S) - 1)]
             self._attempt += 1
             self.sig_event.emit("WARNING", "link", f"reconnecting in {delay:g} s (attempt {self._attempt})")
@@ -299,9 +293,39 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
             self.generator.close()                # its generator went with it
             self.sim.stop()
             self.sim = None                       # start a fresh simulator
-        self.sig_link_state.emit("connecting", self.address)
+        self.sig_link_state.emit(LinkState.CONNECTING, self.address)
         generation = self._link_generation
         self._worker(lambda: self._connect_worker(generation), "gs-reconnect")
+
+    # ------------------------------------------------------------------ read-only consoles
+    def watch(self, endpoint: str, curve_keys: str | None = None, key_name: str = "viewer") -> None:
+        """Become a read-only console on the station publishing at `endpoint`: the same
+        charts, status, recording and analysis; commands refused but ABORT, which goes
+        straight to the device (fanout/viewer.py).  ZeroMQ reconnects by itself: no
+        back-off here."""
+        self.close_replay()
+        self.disconnect_link()
+        try:
+            viewer = self.consoles.open_watch(endpoint, curve_keys, key_name)
+        except GroundStationError as exc:
+            self.sig_link_state.emit(LinkState.FAILED, str(exc))
+            self.sig_event.emit("ERROR", "watch", str(exc))
+            return
+        self.address = viewer.endpoint
+        self.store.clear()
+        for cb in (self.store, self.limits, self._on_block):
+            viewer.subscribe(cb)
+        viewer.add_link_listener(self.sig_link_state.emit)
+        viewer.add_command_listener(self._on_command_done)
+        self.client = viewer
+        self.sig_source.emit("watch", viewer.endpoint)
+        self.consoles.start_watch(viewer)
+
+    def start_publishing(self, endpoint: str, curve_keys: str | None = None) -> bool:
+        """Publish what this window's device link receives (now and after reconnects)
+        for read-only consoles; False (and an ERROR event) when it cannot."""
+        live = self.client if self.consoles.watching is None else None
+        return self.consoles.start_publishing(endpoint, curve_keys, live, self.address)
 
     # ------------------------------------------------------------------ telemetry callbacks
     def _on_block(self, block) -> None:
@@ -360,7 +384,7 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         latter cannot be sent.  A running campaign stops at once (its Testbed.abort: the
         generator session it holds off, its recording closed); a playing profile's wait
         ends and reports "aborted"."""
-        self._play_abort.set()
+        self.profiles.abort()
         self.campaign.abort()
         self.generator.abort()
         client = self.client
@@ -459,6 +483,27 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
     def _param_progress(self, step: str, fraction: float) -> None:
         self.sig_params_progress.emit(step, fraction)
 
+    # ------------------------------------------------------------------ profiles
+    def play_profile(self, profile: Profile, mode: str | None = None) -> str | None:
+        """Play `profile` on the device (self.profiles, through the Station) when this
+        session's link can take it: live, up, and no campaign owning the device.  Returns
+        why not (nothing sent), else None; progress and the outcome arrive as
+        self.profiles' signals.  Abort ends it at once."""
+        client, station = self.client, self.station
+        if (self.replay is not None or client is None or station is None
+                or client.link_state != LinkState.UP):
+            return "not connected: connect to the device first"
+        if self.campaign.running:
+            return "a campaign is running: it owns the device until it ends"
+        return self.profiles.play(station, profile, mode)
+
+    @property
+    def profile_playing(self) -> bool:
+        """Whether a profile is being uploaded or played.  The window's code asks
+        self.profiles.playing; this stays for tests/gui/test_gui_window_controls_and_demo.py,
+        outside this refactor's files."""
+        return self.profiles.playing
+
     # ------------------------------------------------------------------ recording
     def start_recording(self, folder: str, test_name: str, notes: str = "") -> Path | None:
         if self.recorder is not None and self.recorder.state == "recording":
@@ -473,7 +518,7 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
             self.sig_recording_failed.emit(str(exc))
             return None
         self.recorder = rec
-        rec.record("testbed", device_record(self.address == "sim", address=self.address,
+        rec.record("testbed", device_record(self.address == SIMULATED_DEVICE, address=self.address,
                                             seed=self.sim.seed if self.sim else 0,
                                             speed=self.sim_speed))
         if self.client is not None:
@@ -530,5 +575,3 @@ class Session(ConsoleMixin, ProfilePlaybackMixin, QObject):
         if src is not None:
             src.close()
             self.sig_source.emit("none", "")
-
-    # ------------------------------------------------------------------ helpers
