@@ -35,7 +35,7 @@ from ..session.session import Session
 
 CAMPAIGNS_DIR = PROFILES_DIR / "campaigns"
 COLUMNS = ("#", "where", "action", "arguments", "result", "time")
-COL_RESULT, COL_TIME = 4, 5
+COL_ARGS, COL_RESULT, COL_TIME = 3, 4, 5
 BAD_STYLE = "color:#c62828; font-weight:bold;"
 WARN_STYLE = "color:#b26a00;"
 OK_STYLE = "color:#2e7d32; font-weight:bold;"
@@ -88,10 +88,19 @@ class CampaignPanel(QWidget):
 
     # ------------------------------------------------------------------ layout
     def _build(self) -> None:
+        """Top to bottom: the campaign and how to run it, what it is, the progress bars,
+        then its steps beside what it says."""
         lay = QVBoxLayout(self)
         lay.setContentsMargins(4, 2, 4, 2)
         lay.setSpacing(3)
-        top = QHBoxLayout()
+        lay.addLayout(self._run_bar())
+        lay.addLayout(self._about_line())
+        lay.addLayout(self._progress_bars())
+        lay.addWidget(self._steps_and_log(), 1)
+        self._connect_controls()
+
+    def _run_bar(self) -> QHBoxLayout:
+        """The campaign file, where its logs go, the trial-run cap, Run and Abort."""
         self.file = QComboBox()
         self.file.addItem("choose a campaign…", "")
         for path in sorted(CAMPAIGNS_DIR.glob("*.toml")):
@@ -119,6 +128,7 @@ class CampaignPanel(QWidget):
         self.folder.setToolTip("where the logs and report.json / report.txt go")
         self.folder_button = QPushButton("…")
         self.folder_button.setFixedWidth(28)
+        top = QHBoxLayout()
         top.addWidget(QLabel("Campaign"))
         top.addWidget(self.file, 2)
         top.addWidget(self.browse_button)
@@ -132,10 +142,10 @@ class CampaignPanel(QWidget):
         top.addSpacing(12)
         top.addWidget(self.run_button)
         top.addWidget(self.abort_button)
-        lay.addLayout(top)
+        return top
 
-        # what the file says and whether it can run here, on one line
-        about = QHBoxLayout()
+    def _about_line(self) -> QHBoxLayout:
+        """What the file says and whether it can run here, on one line."""
         self.info = QLabel("no campaign loaded")
         self.info.setTextFormat(Qt.TextFormat.RichText)
         self.info.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
@@ -146,27 +156,39 @@ class CampaignPanel(QWidget):
         self.connect_button = QPushButton("Connect the simulator")
         self.connect_button.setToolTip("start the simulated testbed with the campaign's testbed file")
         self.connect_button.setVisible(False)
+        about = QHBoxLayout()
         about.addWidget(self.info, 3)
         about.addWidget(self.readiness, 2)
         about.addWidget(self.connect_button)
-        lay.addLayout(about)
+        return about
 
-        bars = QHBoxLayout()
+    def _progress_bars(self) -> QHBoxLayout:
+        """The current step's progress beside the whole campaign's."""
         self.step_bar = QProgressBar()
-        self.step_bar.setRange(0, 1000)
         self.step_bar.setFormat("step")
         self.campaign_bar = QProgressBar()
-        self.campaign_bar.setRange(0, 1000)
         self.campaign_bar.setFormat("campaign")
+        bars = QHBoxLayout()
         for bar in (self.step_bar, self.campaign_bar):
+            bar.setRange(0, 1000)
             bar.setValue(0)
             bar.setTextVisible(True)
-        bars.addWidget(self.step_bar, 1)
-        bars.addWidget(self.campaign_bar, 1)
-        lay.addLayout(bars)
+            bars.addWidget(bar, 1)
+        return bars
 
-        # the steps beside what the campaign says: a low dock keeps the table's height
+    def _steps_and_log(self) -> QSplitter:
+        """The steps beside what the campaign says: side by side, a low dock keeps the
+        table's height."""
         split = QSplitter(Qt.Orientation.Horizontal)
+        split.addWidget(self._steps_table())
+        split.addWidget(self._log_column())
+        split.setStretchFactor(0, 3)
+        split.setStretchFactor(1, 2)
+        split.setSizes([900, 600])
+        return split
+
+    def _steps_table(self) -> QTableWidget:
+        """One row per step as the runner will do it (filled by load)."""
         self.table = QTableWidget(0, len(COLUMNS))
         self.table.setHorizontalHeaderLabels(list(COLUMNS))
         self.table.verticalHeader().setVisible(False)
@@ -179,8 +201,11 @@ class CampaignPanel(QWidget):
         header = self.table.horizontalHeader()
         for col in range(len(COLUMNS)):
             header.setSectionResizeMode(col, QHeaderView.ResizeMode.ResizeToContents)
-        header.setSectionResizeMode(3, QHeaderView.ResizeMode.Stretch)
-        split.addWidget(self.table)
+        header.setSectionResizeMode(COL_ARGS, QHeaderView.ResizeMode.Stretch)
+        return self.table
+
+    def _log_column(self) -> QWidget:
+        """What the campaign says as it runs, and below it the outcome."""
         right = QWidget()
         col = QVBoxLayout(right)
         col.setContentsMargins(0, 0, 0, 0)
@@ -200,12 +225,9 @@ class CampaignPanel(QWidget):
         self.result.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
         self.result.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
         col.addWidget(self.result)
-        split.addWidget(right)
-        split.setStretchFactor(0, 3)
-        split.setStretchFactor(1, 2)
-        split.setSizes([900, 600])
-        lay.addWidget(split, 1)
+        return right
 
+    def _connect_controls(self) -> None:
         # a campaign chosen in the combo while one runs is not loaded
         self.file_picker = FilePicker(
             self, self.file, self.browse_button, self.load, title="Campaign",
@@ -276,7 +298,7 @@ class CampaignPanel(QWidget):
             cells = (str(step.index + 1), where, step.action, args, "", "")
             for col, text in enumerate(cells):
                 item = QTableWidgetItem(text)
-                if col == 3:
+                if col == COL_ARGS:
                     item.setToolTip("\n".join(f"{k} = {v}" for k, v in step.args.items()))
                 if col in (0, COL_TIME):
                     item.setTextAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
