@@ -48,11 +48,12 @@ def open_simulated_generator(qtbot, win):
     panel = win.generator
     win.session.connect_sim(INERTIAL)
     # the simulator's generator joins the picker once the simulated testbed is up
-    qtbot.waitUntil(panel.select_simulator, timeout=60000)
-    assert panel.resource.currentText().startswith("simulator - TCPIP0::127.0.0.1::")
-    qtbot.mouseClick(panel.connect_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: panel.state is not None, timeout=15000)
-    assert "4053B" in panel.identity.text() and panel.connect_button.text() == "Disconnect"
+    qtbot.waitUntil(panel.channel.select_simulator, timeout=60000)
+    assert panel.channel.resource.currentText().startswith("simulator - TCPIP0::127.0.0.1::")
+    qtbot.mouseClick(panel.channel.connect_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: panel.channel.state is not None, timeout=15000)
+    assert "4053B" in panel.channel.identity.text()
+    assert panel.channel.connect_button.text() == "Disconnect"
     return panel
 
 
@@ -68,24 +69,25 @@ def test_sine_moves_the_base_refusals_and_every_way_off(qtbot, window):
     session, gen = window.session, window.session.generator
     view = next(m for m in window.menuBar().findChildren(QMenu) if m.title() == "&View")
     assert window.docks["Generator"].toggleViewAction() in view.actions()
-    assert "testbed: ≤ 2 Vpp" in panel.ranges["amplitude"].text()    # the testbed's limit shown
+    assert "testbed: ≤ 2 Vpp" in panel.channel.ranges["amplitude"].text()    # the testbed's limit
     # listing the resources again while the generator is open must not close its session
-    panel.refresh_resources()
-    qtbot.waitUntil(panel.refresh_button.isEnabled, timeout=15000)
+    panel.channel.refresh_resources()
+    qtbot.waitUntil(panel.channel.refresh_button.isEnabled, timeout=15000)
 
-    panel.waveform.setCurrentText("SINE")
-    panel.load.setCurrentIndex(panel.load.findData("HZ"))
-    for spin, value in ((panel.frequency, 1.0), (panel.amplitude, 0.2), (panel.offset, 0.0),
-                        (panel.phase, 0.0)):
+    panel.channel.waveform.setCurrentText("SINE")
+    panel.channel.load.setCurrentIndex(panel.channel.load.findData("HZ"))
+    channel = panel.channel
+    for spin, value in ((channel.frequency, 1.0), (channel.amplitude, 0.2), (channel.offset, 0.0),
+                        (channel.phase, 0.0)):
         spin.setValue(value)
-    assert panel.apply() is None
-    qtbot.waitUntil(lambda: panel.state.wave.amplitude_vpp == 0.2
-                    and panel.state.wave.waveform == "SINE", timeout=10000)
-    assert not panel.state.output.on and "Output off" in panel.output_button.text()
+    assert panel.channel.apply() is None
+    qtbot.waitUntil(lambda: panel.channel.state.wave.amplitude_vpp == 0.2
+                    and panel.channel.state.wave.waveform == "SINE", timeout=10000)
+    assert not panel.channel.state.output.on and "Output off" in panel.channel.output_button.text()
 
-    qtbot.mouseClick(panel.output_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: panel.state.output.on, timeout=10000)
-    assert "OUTPUT ON" in panel.output_button.text()         # as the instrument reports it
+    qtbot.mouseClick(panel.channel.output_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: panel.channel.state.output.on, timeout=10000)
+    assert "OUTPUT ON" in panel.channel.output_button.text()    # as the instrument reports it
     t_on = newest(session)
     qtbot.waitUntil(lambda: newest(session) > t_on + 5.0, timeout=20000)
     snap = session.store.ring("HIGH_RATE").snapshot(["encoder_base"], seconds=2.0)
@@ -99,37 +101,37 @@ def test_sine_moves_the_base_refusals_and_every_way_off(qtbot, window):
     assert np.ptp(x) / 2 == pytest.approx(expected, rel=0.1)
 
     # beyond the testbed's 2 Vpp and beyond the instrument: refused, nothing sent
-    panel.amplitude.setValue(3.0)
-    reason = panel.apply()
+    panel.channel.amplitude.setValue(3.0)
+    reason = panel.channel.apply()
     assert "safety limit of 2 Vpp" in reason and "fg_max_amplitude" in reason
-    assert "refused" in panel.status.text() and panel.amplitude.styleSheet() == FIELD_BAD
-    panel.amplitude.setValue(0.2)
-    panel.frequency.setValue(2e7)
-    assert "outside" in panel.apply() and "4053B" in panel.apply()
+    assert "refused" in panel.status.text() and panel.channel.amplitude.styleSheet() == FIELD_BAD
+    panel.channel.amplitude.setValue(0.2)
+    panel.channel.frequency.setValue(2e7)
+    assert "outside" in panel.channel.apply() and "4053B" in panel.channel.apply()
     state = read_back(qtbot, gen)
     assert (state.wave.amplitude_vpp, state.wave.frequency_hz, state.output.on) == (0.2, 1.0, True)
 
     # Esc from anywhere: the output reads back OFF
     qtbot.keyClick(window.events.search, Qt.Key.Key_Escape)
-    qtbot.waitUntil(lambda: not panel.state.output.on, timeout=10000)
-    assert "Output off" in panel.output_button.text()
+    qtbot.waitUntil(lambda: not panel.channel.state.output.on, timeout=10000)
+    assert "Output off" in panel.channel.output_button.text()
 
     # an "output on" asked for just before an abort never outlives it (dropped from the
     # queue, or switched off right after if it was under way)
-    panel.set_output(True)
+    panel.channel.set_output(True)
     window.abort()
     qtbot.waitUntil(gen.idle, timeout=10000)
     assert not read_back(qtbot, gen).output.on
 
     # disconnecting the simulated testbed switches it off too
-    panel.set_output(True)
-    qtbot.waitUntil(lambda: panel.state.output.on, timeout=10000)
+    panel.channel.set_output(True)
+    qtbot.waitUntil(lambda: panel.channel.state.output.on, timeout=10000)
     session.disconnect_link()
-    qtbot.waitUntil(lambda: not panel.state.output.on, timeout=10000)
+    qtbot.waitUntil(lambda: not panel.channel.state.output.on, timeout=10000)
 
     # closing the window: the generator is off before the simulator is stopped
-    panel.set_output(True)
-    qtbot.waitUntil(lambda: panel.state.output.on, timeout=10000)
+    panel.channel.set_output(True)
+    qtbot.waitUntil(lambda: panel.channel.state.output.on, timeout=10000)
     rm = pyvisa.ResourceManager("@py")
     probe = rm.open_resource(gen.resource, read_termination="\n", write_termination="\n",
                              timeout=2000)
@@ -150,41 +152,42 @@ def test_sine_moves_the_base_refusals_and_every_way_off(qtbot, window):
 def test_base_motion_preview_upload_play_and_check(qtbot, window, tmp_path, capsys):
     panel = open_simulated_generator(qtbot, window)
     session, gen = window.session, window.session.generator
-    panel.set_profile_file(BM3)
-    panel.duration.setValue(10.0)
-    profile = panel.preview()
+    panel.base_motion.set_profile_file(BM3)
+    panel.base_motion.duration.setValue(10.0)
+    profile = panel.base_motion.preview()
     assert profile is not None and profile.name == "BM3" and profile.duration_s == 10.0
-    assert panel.rms.value() == pytest.approx(2.1)                   # the table's own RMS
-    for plot in (panel.volts_plot, panel.angle_plot, panel.psd_plot, panel.csp_plot):
+    assert panel.base_motion.rms.value() == pytest.approx(2.1)       # the table's own RMS
+    motion = panel.base_motion
+    for plot in (motion.volts_plot, motion.angle_plot, motion.psd_plot, motion.csp_plot):
         assert plot.listDataItems(), plot
-    x, y = panel.volts_plot.listDataItems()[0].getData()
+    x, y = panel.base_motion.volts_plot.listDataItems()[0].getData()
     assert len(x) == 16384 and np.max(np.abs(y)) == pytest.approx(profile.amplitude_vpp / 2)
-    assert "Vpp of the 2 Vpp allowed" in panel.profile_info.text()
+    assert "Vpp of the 2 Vpp allowed" in panel.base_motion.profile_info.text()
 
     session.start_recording(str(tmp_path), "bm3")
-    assert panel.upload() is None
-    qtbot.waitUntil(lambda: gen.uploaded is not None and panel.state.wave.waveform == "ARB",
+    assert panel.base_motion.upload() is None
+    qtbot.waitUntil(lambda: gen.uploaded is not None and panel.channel.state.wave.waveform == "ARB",
                     timeout=15000)
-    assert panel.state.wave.frequency_hz == pytest.approx(0.1) and not panel.state.output.on
-    assert "BM3 uploaded" in panel.check_text.text()
-    assert panel.check() is None and "output has not been on" in panel.check_text.text()
+    assert panel.channel.state.wave.frequency_hz == pytest.approx(0.1) and not panel.channel.state.output.on
+    assert "BM3 uploaded" in panel.base_motion.check_text.text()
+    assert panel.base_motion.check() is None and "output has not been on" in panel.base_motion.check_text.text()
 
-    panel.set_output(True)
-    qtbot.waitUntil(lambda: panel.state.output.on and gen.motion_start_s is not None,
+    panel.channel.set_output(True)
+    qtbot.waitUntil(lambda: panel.channel.state.output.on and gen.motion_start_s is not None,
                     timeout=10000)
-    assert panel.check() is None and "more are needed" in panel.check_text.text()
+    assert panel.base_motion.check() is None and "more are needed" in panel.base_motion.check_text.text()
     ready = gen.motion_start_s + STAGE.settling_time_s() + profile.duration_s + 0.1
     qtbot.waitUntil(lambda: newest(session) > ready, timeout=30000)
-    result = panel.check()
-    assert result is not None and result.ok, panel.check_text.text()
+    result = panel.base_motion.check()
+    assert result is not None and result.ok, panel.base_motion.check_text.text()
     gui_rms = result.check.achieved_rms_rad
     assert gui_rms == pytest.approx(2.1e-3, rel=0.10)
     assert result.window.seconds == pytest.approx(10.0) and result.window.missing_frames == 0
-    assert "within 10 %" in panel.check_text.text()
-    names = [item.name() for item in panel.csp_plot.listDataItems()]
+    assert "within 10 %" in panel.base_motion.check_text.text()
+    names = [item.name() for item in panel.base_motion.csp_plot.listDataItems()]
     assert any(n.startswith("target") for n in names) and any(n.startswith("achieved") for n in names)
-    panel.set_output(False)
-    qtbot.waitUntil(lambda: not panel.state.output.on, timeout=10000)
+    panel.channel.set_output(False)
+    qtbot.waitUntil(lambda: not panel.channel.state.output.on, timeout=10000)
     path = session.recorder.path
     session.stop_recording()
 

@@ -4,9 +4,10 @@ volts and the base angle the stage model expects), the PSD (target, synthesised,
 achieved) and the cumulative spectral power of target and achieved on one plot.
 
 No numerics here: `groundstation.basemotion` makes and checks the profiles (through the
-GeneratorController).  A part of `GeneratorPanel` (generator/panel.py), which provides `gen`,
-`profile`, `result`, `_edited`, `_preview_timer`, `_say` and (from its channel editor)
-`_channel`.
+GeneratorController).  `BaseMotionEditor` is owned by `GeneratorPanel`
+(generator/panel.py), which places its box and its plots and gives it the controller,
+the panel's `ChannelEditor` (the channel to upload to; an upload's read-back refills
+the wave fields) and its status line (`say`).
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt, QTimer
+from PySide6.QtCore import QObject, Qt, QTimer
 from PySide6.QtGui import QFont
 from PySide6.QtWidgets import (QCheckBox, QComboBox, QFileDialog, QGridLayout, QGroupBox,
                                QHBoxLayout, QLabel, QPushButton, QSpinBox, QVBoxLayout)
@@ -31,6 +32,7 @@ from .records import DEFAULT_TOLERANCE, CheckResult, UploadedProfile
 from .styles import BAD_STYLE, OK_STYLE, SMALL_STYLE, WARN_STYLE, _spin
 
 if TYPE_CHECKING:
+    from .channel_editor import ChannelEditor
     from .controller import GeneratorController
 
 BASE_MOTION_DIR = PROFILES_DIR / "base_motion"
@@ -43,17 +45,28 @@ MRAD = 1e3
 MRAD2 = 1e6
 
 
-class BaseMotionEditor:
+class BaseMotionEditor(QObject):
     """Builds the "Base motion" box and the plots; previews, uploads and checks."""
 
-    # provided by the panel shell (GeneratorPanel)
-    gen: GeneratorController
-    profile: BaseMotionProfile | None
-    result: CheckResult | None
-    _edited: bool
-    _preview_timer: QTimer
-    _channel: Callable[[], int]
-    _say: Callable[..., None]
+    def __init__(self, gen: GeneratorController, channel: ChannelEditor,
+                 say: Callable[..., None], parent: QObject | None = None):
+        super().__init__(parent)
+        self.gen = gen
+        self.channel = channel
+        self._say = say
+        self.profile: BaseMotionProfile | None = None       # the previewed profile
+        self.result: CheckResult | None = None
+        self._preview_timer = QTimer(self)
+        self._preview_timer.setSingleShot(True)
+        self._preview_timer.setInterval(150)  # one preview per burst of edits
+        self._preview_timer.timeout.connect(self.preview)
+        self.motion_box = self._motion_box()
+        self.plots_view = self._plots()
+        gen.sig_uploaded.connect(self._on_uploaded)
+        gen.sig_opened.connect(self._on_opened)
+        gen.sig_closed.connect(self._on_closed)
+        self.upload_button.setEnabled(False)
+        self._schedule_preview()
 
     def _motion_box(self) -> QGroupBox:
         box = QGroupBox("Base motion")
@@ -176,7 +189,7 @@ class BaseMotionEditor:
             self._schedule_preview()
 
     def _browse(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "PSD table", str(BASE_MOTION_DIR),
+        path, _ = QFileDialog.getOpenFileName(self.motion_box, "PSD table", str(BASE_MOTION_DIR),
                                               "PSD tables (*.csv *.txt);;All files (*)")
         if path:
             self.set_profile_file(path)
@@ -264,11 +277,17 @@ class BaseMotionEditor:
         if profile is None:
             self._say("nothing to upload: the profile could not be made (see above)", bad=True)
             return "no profile"
-        reason = self.gen.upload_profile(self._channel(), profile)
-        if reason is None:                # a refusal was said by _on_refused
-            self._edited = False
+        reason = self.gen.upload_profile(self.channel.channel_number(), profile)
+        if reason is None:                # a refusal was said by the channel editor
+            self.channel.expect_readback()
             self._say(f"uploading {profile.name} ({profile.points} points)…")
         return reason
+
+    def _on_opened(self, _resource: str, _identity: str) -> None:
+        self.upload_button.setEnabled(True)
+
+    def _on_closed(self, _resource: str) -> None:
+        self.upload_button.setEnabled(False)
 
     def _on_uploaded(self, up: UploadedProfile) -> None:
         self.result = None

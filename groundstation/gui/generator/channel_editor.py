@@ -4,15 +4,16 @@ basic wave with the allowed range of every field (instrument and testbed), Apply
 the output button - whose state is what the instrument last reported, never what was
 clicked.
 
-A part of `GeneratorPanel` (generator/panel.py), which provides `gen` (the
-GeneratorController), `state`, `_edited`, `_filling`, `busy`, `_set_open` and `_say`.
+`ChannelEditor` is owned by `GeneratorPanel` (generator/panel.py), which places its two
+boxes and gives it the session (the GeneratorController, and the link whose simulator
+brings a generator), its status line (`say`) and its busy line (`show_busy`).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Callable
 
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QObject, Qt
 from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QGridLayout, QGroupBox, QHBoxLayout,
                                QLabel, QPushButton, QVBoxLayout)
 
@@ -23,7 +24,7 @@ from .records import SIMULATOR, GeneratorState, ResourceChoice
 from .styles import SMALL_STYLE, WARN_STYLE, _spin
 
 if TYPE_CHECKING:
-    from .controller import GeneratorController
+    from ..session.session import Session
 
 FIELD_BAD = "QDoubleSpinBox { background:#ffcdd2; }"
 OUTPUT_ON_STYLE = ("QPushButton { background:#c62828; color:white; font-weight:bold; "
@@ -32,18 +33,30 @@ OUTPUT_OFF_STYLE = ("QPushButton { background:#424242; color:#e0e0e0; font-weigh
                     "padding:6px; border-radius:4px; } QPushButton:disabled { color:#808080; }")
 
 
-class ChannelEditor:
+class ChannelEditor(QObject):
     """Builds the "Instrument" and "Basic wave" boxes and follows the controller's
     resources, connection, read-back and refusals."""
 
-    # provided by the panel shell (GeneratorPanel)
-    gen: GeneratorController
-    state: GeneratorState | None
-    _edited: bool
-    _filling: bool
-    busy: QLabel
-    _set_open: Callable[[bool], None]
-    _say: Callable[..., None]
+    def __init__(self, session: Session, say: Callable[..., None],
+                 show_busy: Callable[[str], None], parent: QObject | None = None):
+        super().__init__(parent)
+        self.gen = session.generator
+        self._say = say
+        self._show_busy = show_busy
+        self.state: GeneratorState | None = None   # what the instrument last reported
+        self._edited = False              # wave fields edited since the last read-back
+        self._filling = False             # the read-back is being put into the fields
+        self.instrument_box = self._instrument_box()
+        self.wave_box = self._wave_box()
+        g = self.gen
+        g.sig_resources.connect(self._on_resources)
+        g.sig_opened.connect(self._on_opened)
+        g.sig_closed.connect(self._on_closed)
+        g.sig_state.connect(self._on_state)
+        g.sig_refused.connect(self._on_refused)
+        session.sig_link_state.connect(self._on_link)
+        self._show_open(False)
+        self._update_ranges()
 
     def _instrument_box(self) -> QGroupBox:
         box = QGroupBox("Instrument")
@@ -64,12 +77,12 @@ class ChannelEditor:
         lay.addLayout(pick)
         conn = QHBoxLayout()
         self.connect_button = QPushButton("Connect")
-        self.channel = QComboBox()
-        self.channel.addItems(["1", "2"])
-        self.channel.setToolTip("the channel wired to the base-stage amplifier (the simulator: 1)")
+        self.channel_combo = QComboBox()
+        self.channel_combo.addItems(["1", "2"])
+        self.channel_combo.setToolTip("the channel wired to the base-stage amplifier (the simulator: 1)")
         conn.addWidget(self.connect_button, 1)
         conn.addWidget(QLabel("Channel"))
-        conn.addWidget(self.channel)
+        conn.addWidget(self.channel_combo)
         lay.addLayout(conn)
         self.identity = QLabel("not connected")
         self.identity.setStyleSheet(SMALL_STYLE)
@@ -92,12 +105,11 @@ class ChannelEditor:
         self.refresh_button.clicked.connect(self.refresh_resources)
         self.connect_button.clicked.connect(self._toggle_connection)
         self.output_button.clicked.connect(self._toggle_output)
-        self.channel.currentIndexChanged.connect(lambda _: self._channel_changed())
+        self.channel_combo.currentIndexChanged.connect(lambda _: self._channel_changed())
         return box
 
     def _wave_box(self) -> QGroupBox:
         box = QGroupBox("Basic wave")
-        self.wave_box = box
         lay = QVBoxLayout(box)
         lay.setSpacing(3)
         top = QHBoxLayout()
@@ -151,9 +163,14 @@ class ChannelEditor:
         return box
 
     # ------------------------------------------------------------------ resources and connection
+    def _show_open(self, is_open: bool) -> None:
+        self.connect_button.setText("Disconnect" if is_open else "Connect")
+        for w in (self.apply_button, self.output_button):
+            w.setEnabled(is_open)
+
     def refresh_resources(self) -> None:
         self.refresh_button.setEnabled(False)
-        self.busy.setText("listing VISA resources…")
+        self._show_busy("listing VISA resources…")
         self.gen.refresh_resources()
 
     def _on_resources(self, choices: list[ResourceChoice], notes) -> None:
@@ -184,7 +201,7 @@ class ChannelEditor:
         self.resource.lineEdit().setCursorPosition(0)     # the start names the resource
         self.resource.blockSignals(False)
         self.refresh_button.setEnabled(True)
-        self.busy.setText("")
+        self._show_busy("")
         self.resource.setToolTip("VISA resources found: " + (", ".join(c.resource for c in choices)
                                                               or "none")
                                  + ("\n" + "\n".join(notes) if notes else ""))
@@ -219,7 +236,7 @@ class ChannelEditor:
         limits = self.gen.limits
         self.identity.setText(identity.split(" (")[0] + " connected")
         self.identity.setToolTip(f"{identity}\n{resource}")
-        self._set_open(True)
+        self._show_open(True)
         self._edited = False
         self._say(f"connected to {identity}; testbed limits: {limits.max_amplitude_vpp:g} Vpp, "
                   f"±{limits.max_offset_v:g} V offset ({limits.source})" if limits else
@@ -231,7 +248,7 @@ class ChannelEditor:
         self.readback.setText("")
         self.refusal.setText("")
         self.state = None
-        self._set_open(False)
+        self._show_open(False)
         self._show_output(None)
         self._say(f"{resource} closed (outputs off)")
 
@@ -240,13 +257,18 @@ class ChannelEditor:
             self.refresh_resources()      # the simulator's generator comes and goes with it
 
     # ------------------------------------------------------------------ the basic wave
-    def _channel(self) -> int:
-        return int(self.channel.currentText())
+    def channel_number(self) -> int:
+        """The generator channel wired to the base stage (1 or 2), as picked."""
+        return int(self.channel_combo.currentText())
+
+    def expect_readback(self) -> None:
+        """Something was sent: the read-back that follows fills the wave fields."""
+        self._edited = False
 
     def _channel_changed(self) -> None:
         if self.gen.is_open:
             self._edited = False
-            self.gen.refresh(self._channel())
+            self.gen.refresh(self.channel_number())
 
     def _wave_edited(self, field: QDoubleSpinBox | None = None) -> None:
         if self._filling:
@@ -280,12 +302,12 @@ class ChannelEditor:
         """Send the fields (checked first: a refusal names the limit and sends nothing)."""
         for spin in self.fields.values():
             spin.setStyleSheet("")
-        reason = self.gen.apply(self._channel(), waveform=self.waveform.currentText(),
+        reason = self.gen.apply(self.channel_number(), waveform=self.waveform.currentText(),
                                 frequency_hz=self.frequency.value(),
                                 amplitude_vpp=self.amplitude.value(), offset_v=self.offset.value(),
                                 phase_deg=self.phase.value(), load=self.load.currentData())
         if reason is None:
-            self._edited = False          # the read-back that follows fills the fields
+            self.expect_readback()
             self._say("sending…")
         return reason
 
@@ -298,7 +320,7 @@ class ChannelEditor:
         self._say(f"refused, nothing sent: {text.replace('; nothing was sent', '')}", bad=True)
 
     def _on_state(self, state: GeneratorState) -> None:
-        if state.channel != self._channel():
+        if state.channel != self.channel_number():
             return
         self.state = state
         self.readback.setText(f"instrument reports: {state.text()}")
@@ -345,4 +367,4 @@ class ChannelEditor:
 
     def set_output(self, on: bool) -> str | None:
         """Ask for the output on/off; the button follows the read-back, not this call."""
-        return self.gen.set_output(self._channel(), on)
+        return self.gen.set_output(self.channel_number(), on)

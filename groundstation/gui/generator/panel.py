@@ -13,56 +13,47 @@ The widget does no I/O and no numerics: the GeneratorController (session.generat
 talks to the instrument on its worker thread, `groundstation.basemotion` makes and
 checks the profiles.
 
-This module is the panel's shell (layout, status line, what needs an open generator);
-its two sides are parts of it with a module each, `channel_editor` (instrument, basic
-wave, output) and `base_motion` (profile, upload, check, plots), with their common
-look in `styles`.
+The panel lays out and owns its two sides, each an object with a module of its own:
+`channel` (a `ChannelEditor`: instrument, basic wave, output; channel_editor.py) and
+`base_motion` (a `BaseMotionEditor`: profile, upload, check, plots; base_motion.py).
+The panel keeps the status line both sides report to; their common look is in
+styles.py.
 """
 
 from __future__ import annotations
 
-from PySide6.QtCore import Qt, QTimer
+from PySide6.QtCore import Qt
 from PySide6.QtWidgets import QHBoxLayout, QLabel, QSizePolicy, QVBoxLayout, QWidget
 
-from ...basemotion import BaseMotionProfile
 from ..common.dock_layout import controls_beside_plots
 from .base_motion import BaseMotionEditor
 from .channel_editor import ChannelEditor
-from .records import CheckResult, GeneratorState
 from .styles import BAD_STYLE, WARN_STYLE
 from ..session.session import Session
 
 
-class GeneratorPanel(ChannelEditor, BaseMotionEditor, QWidget):
+class GeneratorPanel(QWidget):
+    """The generator dock: the channel editor and the base-motion editor side by side
+    above the status line they report to."""
+
     def __init__(self, session: Session, parent: QWidget | None = None):
         super().__init__(parent)
         self.session = session
         self.gen = session.generator
-        self.profile: BaseMotionProfile | None = None       # the previewed profile
-        self.result: CheckResult | None = None
-        self.state: GeneratorState | None = None
-        self._filling = False
-        self._edited = False              # wave fields edited since the last read-back
-        self._preview_timer = QTimer(self)
-        self._preview_timer.setSingleShot(True)
-        self._preview_timer.setInterval(150)  # one preview per burst of edits
-        self._preview_timer.timeout.connect(self.preview)
+        self.status = QLabel("")
+        self.status.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
+        # long messages must not widen the window: elided by the layout, whole in the tooltip
+        self.status.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
+        self.busy = QLabel("")
+        self.busy.setStyleSheet(WARN_STYLE)
+        self.channel = ChannelEditor(session, self._say, self.busy.setText, self)
+        self.base_motion = BaseMotionEditor(self.gen, self.channel, self._say, self)
         self._build()
         g = self.gen
-        g.sig_resources.connect(self._on_resources)
-        g.sig_opened.connect(self._on_opened)
-        g.sig_closed.connect(self._on_closed)
-        g.sig_state.connect(self._on_state)
-        g.sig_uploaded.connect(self._on_uploaded)
         g.sig_failed.connect(lambda action, text: self._say(f"{action}: {text}", bad=True))
-        g.sig_refused.connect(self._on_refused)
         g.sig_info.connect(self._say)
         g.sig_busy.connect(lambda what: self.busy.setText(f"{what}…" if what else ""))
-        session.sig_link_state.connect(self._on_link)
-        self._set_open(False)
-        self._update_ranges()
-        self.refresh_resources()
-        self._schedule_preview()
+        self.channel.refresh_resources()
 
     # ------------------------------------------------------------------ layout
     def _build(self) -> None:
@@ -71,25 +62,13 @@ class GeneratorPanel(ChannelEditor, BaseMotionEditor, QWidget):
         outer.setSpacing(2)
         # three short columns (instrument, basic wave, base motion) beside the plots
         split = controls_beside_plots(
-            [self._instrument_box(), self._wave_box(), self._motion_box()], self._plots(),
-            min_width=280, plots_width=600, pad=40)
+            [self.channel.instrument_box, self.channel.wave_box, self.base_motion.motion_box],
+            self.base_motion.plots_view, min_width=280, plots_width=600, pad=40)
         outer.addWidget(split, 1)
         status = QHBoxLayout()
-        self.status = QLabel("")
-        self.status.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
-        # long messages must not widen the window: elided by the layout, whole in the tooltip
-        self.status.setSizePolicy(QSizePolicy.Policy.Ignored, QSizePolicy.Policy.Preferred)
-        self.busy = QLabel("")
-        self.busy.setStyleSheet(WARN_STYLE)
         status.addWidget(self.status, 1)
         status.addWidget(self.busy)
         outer.addLayout(status)
-
-    # ------------------------------------------------------------------ open or not (both sides)
-    def _set_open(self, is_open: bool) -> None:
-        self.connect_button.setText("Disconnect" if is_open else "Connect")
-        for w in (self.apply_button, self.output_button, self.upload_button):
-            w.setEnabled(is_open)
 
     # ------------------------------------------------------------------ status
     def _say(self, text: str, bad: bool = False) -> None:
