@@ -97,84 +97,124 @@ def read_analysis(table: Any, path: Path, name: str, matrix: dict[str, list[Any]
     if not isinstance(table, dict):
         problems.append(f"{head} must be a table ([analysis] with keys {', '.join(ANALYSIS_KEYS)})")
         return AnalysisSpec(given=True)
-    found: list[str] = []
-
-    def bad(key: str, text: str) -> None:
-        found.append(f"{head} {key} = {show(table[key])} - {text}")
-
-    unknown = sorted(set(table) - set(ANALYSIS_KEYS))
-    if unknown:
-        found.append(f"{head}: unknown key(s) {', '.join(unknown)} (allowed: {', '.join(ANALYSIS_KEYS)})")
-    values: dict[str, Any] = {}
-    for key in ("duration_s", "integration_period_s"):
-        if key in table:
-            v = table[key]
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
-                bad(key, "must be a finite number > 0 (seconds)")
-            else:
-                values[key] = float(v)
-    if "max_excluded_fraction" in table:
-        v = table["max_excluded_fraction"]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
-            bad("max_excluded_fraction", "must be a fraction from 0 to 1 (0.01: a window with more "
-                                         "than 1 % excluded is not valid)")
-        else:
-            values["max_excluded_fraction"] = float(v)
-    if "sensor" in table:
-        from ..analysis import SENSORS            # the log adapter (numpy, h5py): only here
-        if table["sensor"] not in SENSORS:
-            bad("sensor", f"not a scored sensor (one of {', '.join(SENSORS)})")
-        else:
-            values["sensor"] = table["sensor"]
-    keys = list(matrix)
-    for key in ("group_by", "compare"):
-        if key in table:
-            v = table[key]
-            if not isinstance(v, str) or v not in matrix:
-                bad(key, f"must name a key of [matrix] ({', '.join(keys) or 'the file has no matrix'})")
-            else:
-                values[key] = v
-    if values.get("group_by") and values.get("group_by") == values.get("compare"):
-        bad("compare", "must be another matrix key than group_by (the groups hold the values compared)")
-        values.pop("compare")
-    if "baseline" in table:
-        compare = values.get("compare")
-        if "compare" not in table:
-            bad("baseline", "needs compare = MATRIX_KEY (the key whose values the baseline is one of)")
-        elif compare:
-            v = table["baseline"]
-            hits = [x for x in matrix[compare]
-                    if x == v or (isinstance(x, str) and isinstance(v, str) and Path(x).stem == v)]
-            shown = ", ".join(show(x) for x in matrix[compare])
-            if not hits:
-                bad("baseline", f"not a value of [matrix] {compare} (as written, or a file's "
-                                f"name without its extension): {shown}")
-            elif len(hits) > 1:
-                bad("baseline", f"names {len(hits)} values of [matrix] {compare}: give the path "
-                                f"as written in [matrix]")
-            else:
-                values["baseline"] = hits[0]
-    if "metrics" in table:
-        problem, names = _metrics_problem(table["metrics"])
-        if problem:
-            bad("metrics", problem)
-        else:
-            values["metrics"] = names
-    if "start_after_mark" in table:
-        v = table["start_after_mark"]
-        if not isinstance(v, str) or not v.strip():
-            bad("start_after_mark", "must be text: the text (or the start of the text) of a "
-                                    "mark step")
-        else:
-            problem = _mark_problem(v, name, combos, steps)
-            if problem:
-                bad("start_after_mark", problem)
-            else:
-                values["start_after_mark"] = v
-    problems += found
+    check = _AnalysisTable(table, head, matrix)
+    check.keys_known()
+    check.numbers()
+    check.sensor()
+    check.grouping()
+    check.baseline()
+    check.metrics()
+    check.start_after_mark(name, combos, steps)
+    problems += check.found
+    values = check.values
     if values.get("compare") and "baseline" not in values:
         values["baseline"] = matrix[values["compare"]][0]       # the first value, as the matrix lists it
     return AnalysisSpec(given=True, **values)
+
+
+class _AnalysisTable:
+    """The checks of one [analysis] table: what each accepts goes to `values`, what it
+    refuses to `found`."""
+
+    def __init__(self, table: dict, head: str, matrix: dict[str, list[Any]]) -> None:
+        self.table, self.head, self.matrix = table, head, matrix
+        self.found: list[str] = []
+        self.values: dict[str, Any] = {}
+
+    def bad(self, key: str, text: str) -> None:
+        self.found.append(f"{self.head} {key} = {show(self.table[key])} - {text}")
+
+    def keys_known(self) -> None:
+        unknown = sorted(set(self.table) - set(ANALYSIS_KEYS))
+        if unknown:
+            self.found.append(f"{self.head}: unknown key(s) {', '.join(unknown)} "
+                              f"(allowed: {', '.join(ANALYSIS_KEYS)})")
+
+    def numbers(self) -> None:
+        table, values = self.table, self.values
+        for key in ("duration_s", "integration_period_s"):
+            if key in table:
+                v = table[key]
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or v <= 0:
+                    self.bad(key, "must be a finite number > 0 (seconds)")
+                else:
+                    values[key] = float(v)
+        if "max_excluded_fraction" in table:
+            v = table["max_excluded_fraction"]
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 <= v <= 1:
+                self.bad("max_excluded_fraction", "must be a fraction from 0 to 1 (0.01: a window "
+                                                  "with more than 1 % excluded is not valid)")
+            else:
+                values["max_excluded_fraction"] = float(v)
+
+    def sensor(self) -> None:
+        if "sensor" in self.table:
+            from ..analysis import SENSORS            # the log adapter (numpy, h5py): only here
+            if self.table["sensor"] not in SENSORS:
+                self.bad("sensor", f"not a scored sensor (one of {', '.join(SENSORS)})")
+            else:
+                self.values["sensor"] = self.table["sensor"]
+
+    def grouping(self) -> None:
+        """group_by and compare: keys of [matrix], and not the same one."""
+        table, values, matrix = self.table, self.values, self.matrix
+        keys = list(matrix)
+        for key in ("group_by", "compare"):
+            if key in table:
+                v = table[key]
+                if not isinstance(v, str) or v not in matrix:
+                    self.bad(key, f"must name a key of [matrix] "
+                                  f"({', '.join(keys) or 'the file has no matrix'})")
+                else:
+                    values[key] = v
+        if values.get("group_by") and values.get("group_by") == values.get("compare"):
+            self.bad("compare", "must be another matrix key than group_by (the groups hold the "
+                                "values compared)")
+            values.pop("compare")
+
+    def baseline(self) -> None:
+        """baseline: one value of the compared matrix key, as written or by file stem."""
+        if "baseline" not in self.table:
+            return
+        compare = self.values.get("compare")
+        if "compare" not in self.table:
+            self.bad("baseline", "needs compare = MATRIX_KEY (the key whose values the baseline "
+                                 "is one of)")
+        elif compare:
+            v = self.table["baseline"]
+            hits = [x for x in self.matrix[compare]
+                    if x == v or (isinstance(x, str) and isinstance(v, str) and Path(x).stem == v)]
+            shown = ", ".join(show(x) for x in self.matrix[compare])
+            if not hits:
+                self.bad("baseline", f"not a value of [matrix] {compare} (as written, or a file's "
+                                     f"name without its extension): {shown}")
+            elif len(hits) > 1:
+                self.bad("baseline", f"names {len(hits)} values of [matrix] {compare}: give the "
+                                     f"path as written in [matrix]")
+            else:
+                self.values["baseline"] = hits[0]
+
+    def metrics(self) -> None:
+        if "metrics" in self.table:
+            problem, names = _metrics_problem(self.table["metrics"])
+            if problem:
+                self.bad("metrics", problem)
+            else:
+                self.values["metrics"] = names
+
+    def start_after_mark(self, name: str, combos: list[dict[str, Any]], steps: list[Step]) -> None:
+        if "start_after_mark" not in self.table:
+            return
+        v = self.table["start_after_mark"]
+        if not isinstance(v, str) or not v.strip():
+            self.bad("start_after_mark", "must be text: the text (or the start of the text) of a "
+                                         "mark step")
+            return
+        problem = _mark_problem(v, name, combos, steps)
+        if problem:
+            self.bad("start_after_mark", problem)
+        else:
+            self.values["start_after_mark"] = v
 
 
 def _metrics_problem(value: Any) -> tuple[str, tuple[str, ...]]:

@@ -153,7 +153,23 @@ def _load(path: Path, chain: tuple[Path, ...]) -> ControllerDesign:
                       allowed=f"a frequency in Hz between 0 and {CONTROL_RATE_HZ / 2:g} (Nyquist)")
     kp = _number(d, "outer_loop_gain_per_s", where, "design", required=(mode == "inertial"),
                  lo=0.0, allowed="a gain >= 0 in 1/s (K_p of the outer position loop)")
+    sat_coarse, sat_fine, anti_windup = _saturation(doc, where)
+    friction = _friction(doc, where)
+    q, c1, c2 = _controller_ratio(doc, where)
+    notes: list[str] = []
+    c0, equivalent_to = _c0(doc, path, chain, mode, c1, c2, testbed, where, notes)
+    _check_runnable(where, c0, c1, c2, q, equivalent_to, prewarp)
+    return ControllerDesign(
+        path=path.resolve(), name=name, description=description, mode=mode, testbed=testbed,
+        c0=c0, c1=c1, c2=c2, q=q, saturation_coarse_in_oz=sat_coarse,
+        saturation_fine_in_oz=sat_fine, anti_windup=anti_windup, friction=friction,
+        outer_loop_gain_per_s=kp,
+        prewarp_hz=prewarp, c0_equivalent_to=equivalent_to, c0_order=c0.order,
+        notes=tuple(notes), text=text)
 
+
+def _saturation(doc: dict, where: str) -> tuple[float, float, str]:
+    """(coarse limit, fine limit, anti-windup) of the [saturation] table."""
     sat = _table(doc, "saturation", where)
     _no_unknown(sat, _SATURATION_KEYS, where, "[saturation]")
     sat_coarse = _number(sat, "coarse_in_oz", where, "saturation", lo=0.0,
@@ -164,43 +180,55 @@ def _load(path: Path, chain: tuple[Path, ...]) -> ControllerDesign:
     if anti_windup not in ANTI_WINDUP:
         raise DesignError(f"{where}: saturation.anti_windup must be one of "
                           f"{', '.join(repr(k) for k in ANTI_WINDUP)}, got {anti_windup!r}")
-    friction = _friction(doc, where)
+    return sat_coarse, sat_fine, anti_windup
 
-    notes: list[str] = []
+
+def _controller_ratio(doc: dict, where: str
+                      ) -> tuple[TransferFunction | None, TransferFunction, TransferFunction]:
+    """(Q or None, c1, c2): from [Q] (c1 = Q, c2 = 1) or from [c1] and [c2]."""
     if "Q" in doc and ("c1" in doc or "c2" in doc):
         raise DesignError(f"{where}: give either [Q] (c1' = Q, c2' = 1) or both [c1] and [c2], "
                           f"not both")
     if "Q" in doc:
         q = _transfer_function(doc, "Q", where)
-        c1, c2 = q, TransferFunction.constant(1.0)
-    elif "c1" in doc and "c2" in doc:
-        q = None
-        c1, c2 = _transfer_function(doc, "c1", where), _transfer_function(doc, "c2", where)
-    else:
-        raise DesignError(f"{where}: missing [Q] (the controller ratio; c1' = Q, c2' = 1) "
-                          f"or both [c1] and [c2]")
+        return q, q, TransferFunction.constant(1.0)
+    if "c1" in doc and "c2" in doc:
+        return None, _transfer_function(doc, "c1", where), _transfer_function(doc, "c2", where)
+    raise DesignError(f"{where}: missing [Q] (the controller ratio; c1' = Q, c2' = 1) "
+                      f"or both [c1] and [c2]")
 
+
+def _c0(doc: dict, path: Path, chain: tuple[Path, ...], mode: str, c1: TransferFunction,
+        c2: TransferFunction, testbed, where: str,
+        notes: list[str]) -> tuple[TransferFunction, Path | None]:
+    """(c0, the design it is output-equivalent to or None): [c0] as written, or made
+    equivalent to another design's controller (what that did goes to `notes`)."""
     raw_c0 = _table(doc, "c0", where)
-    equivalent_to = None
-    if "equivalent_to" in raw_c0:
-        _no_unknown(raw_c0, _EQUIVALENT_KEYS, where, "[c0] with equivalent_to")
-        equivalent_to = raw_c0["equivalent_to"]
-        if not isinstance(equivalent_to, Path):
-            raise DesignError(f"{where}: c0.equivalent_to must be the path of a design file "
-                              f"(text), got {equivalent_to!r}")
-        tol = _number(raw_c0, "cancel_tolerance", where, "c0", required=False, lo=0.0, hi=0.1,
-                      allowed="a relative tolerance between 0 and 0.1")
-        tol = CANCEL_TOLERANCE if tol is None else tol
-        partner = _partner(equivalent_to, path, chain, mode)
-        c0, cancelled = output_equivalent_c0(partner, c1, c2, testbed, tol, where)
-        notes.append(f"c0 is output-equivalent to {equivalent_to.name} on {testbed.name}: order "
-                     f"{c0.order} ({len(c0.zeros)} zeros, {len(c0.poles)} poles) after "
-                     f"cancelling {cancelled} pole/zero pair(s) within {tol:g}")
-        if partner.testbed.path != testbed.path:
-            notes.append(f"{equivalent_to.name} was designed for {partner.testbed.path.name}; the "
-                         f"equivalence uses this design's testbed {testbed.path.name}")
-    else:
-        c0 = _transfer_function(doc, "c0", where)
+    if "equivalent_to" not in raw_c0:
+        return _transfer_function(doc, "c0", where), None
+    _no_unknown(raw_c0, _EQUIVALENT_KEYS, where, "[c0] with equivalent_to")
+    equivalent_to = raw_c0["equivalent_to"]
+    if not isinstance(equivalent_to, Path):
+        raise DesignError(f"{where}: c0.equivalent_to must be the path of a design file "
+                          f"(text), got {equivalent_to!r}")
+    tol = _number(raw_c0, "cancel_tolerance", where, "c0", required=False, lo=0.0, hi=0.1,
+                  allowed="a relative tolerance between 0 and 0.1")
+    tol = CANCEL_TOLERANCE if tol is None else tol
+    partner = _partner(equivalent_to, path, chain, mode)
+    c0, cancelled = output_equivalent_c0(partner, c1, c2, testbed, tol, where)
+    notes.append(f"c0 is output-equivalent to {equivalent_to.name} on {testbed.name}: order "
+                 f"{c0.order} ({len(c0.zeros)} zeros, {len(c0.poles)} poles) after "
+                 f"cancelling {cancelled} pole/zero pair(s) within {tol:g}")
+    if partner.testbed.path != testbed.path:
+        notes.append(f"{equivalent_to.name} was designed for {partner.testbed.path.name}; the "
+                     f"equivalence uses this design's testbed {testbed.path.name}")
+    return c0, equivalent_to
+
+
+def _check_runnable(where: str, c0: TransferFunction, c1: TransferFunction,
+                    c2: TransferFunction, q: TransferFunction | None,
+                    equivalent_to: Path | None, prewarp: float | None) -> None:
+    """Raise DesignError unless each filter discretises and is proper."""
     labels = {"c0": "[c0]" + (f" (output-equivalent to {equivalent_to.name})" if equivalent_to else ""),
               "c1": "[Q] (c1' = Q)" if q is not None else "[c1]", "c2": "[c2]"}
     problems = [_singular_text(labels[label], kind, r, CONTROL_RATE_HZ, prewarp)
@@ -213,13 +241,6 @@ def _load(path: Path, chain: tuple[Path, ...]) -> ControllerDesign:
             raise DesignError(f"{where}: {label} has {len(tf.zeros)} zeros and {len(tf.poles)} "
                               f"poles: it must be proper (no more zeros than poles) to run as "
                               f"a filter; add roll-off poles")
-    return ControllerDesign(
-        path=path.resolve(), name=name, description=description, mode=mode, testbed=testbed,
-        c0=c0, c1=c1, c2=c2, q=q, saturation_coarse_in_oz=sat_coarse,
-        saturation_fine_in_oz=sat_fine, anti_windup=anti_windup, friction=friction,
-        outer_loop_gain_per_s=kp,
-        prewarp_hz=prewarp, c0_equivalent_to=equivalent_to, c0_order=c0.order,
-        notes=tuple(notes), text=text)
 
 
 def _merged_document(path: Path, chain: tuple[Path, ...]) -> tuple[dict, str]:

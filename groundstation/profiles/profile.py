@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import csv
 import math
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
@@ -230,11 +231,21 @@ def _read_csv(path: Path, column: str | int | None, time_column: str | None,
     return data[:, 0], (data[:, 1] if t_idx is not None else None)
 
 
-def profile_from_dict(doc: dict, *, source: str = "", base_dir: Path | None = None,
-                      rate: float = RATE_HZ) -> Profile:
-    """A Profile from a parsed profile document ({'profile': …, 'generator': …}); errors
-    are ProfileFileError naming `source` and the field."""
-    src = source or "profile"
+@dataclass(frozen=True)
+class _ProfileHeader:
+    """The [profile] table of a profile document, checked."""
+
+    name: str
+    target: str
+    info: TargetInfo
+    description: str
+    origin: str
+    duration_s: float | None
+    ramp_s: float | None
+
+
+def _tables(doc: dict, src: str) -> tuple[dict, dict]:
+    """The document's [profile] and [generator] tables; nothing else may be there."""
     ptable = doc.get("profile")
     gtable = doc.get("generator")
     if not isinstance(ptable, dict):
@@ -244,7 +255,10 @@ def profile_from_dict(doc: dict, *, source: str = "", base_dir: Path | None = No
     for extra in doc:
         if extra not in ("profile", "generator"):
             raise _fail(src, f"unknown table [{extra}] (a profile file has [profile] and [generator])")
-    where = f"{src} [profile]"
+    return ptable, gtable
+
+
+def _profile_header(ptable: dict, where: str) -> _ProfileHeader:
     unknown = [k for k in ptable if k not in _PROFILE_KEYS]
     if unknown:
         raise _fail(where, f"unknown key{'s' if len(unknown) > 1 else ''} {', '.join(unknown)} "
@@ -254,7 +268,6 @@ def profile_from_dict(doc: dict, *, source: str = "", base_dir: Path | None = No
             raise _fail(where, f"{key} is missing")
         if not isinstance(ptable[key], str) or not ptable[key]:
             raise _fail(where, f"{key} must be a non-empty string")
-    name = ptable["name"]
     target = ptable["target"]
     if target not in TARGETS:
         raise _fail(where, f"target {target!r} is not one of {', '.join(TARGETS)}")
@@ -278,13 +291,18 @@ def profile_from_dict(doc: dict, *, source: str = "", base_dir: Path | None = No
         raise _fail(where, f"ramp_s must be ≥ 0, not {ramp_s}")
     if duration_s is not None and duration_s <= 0:
         raise _fail(where, f"duration_s must be > 0, not {duration_s}")
+    return _ProfileHeader(ptable["name"], target, info, description, origin, duration_s, ramp_s)
 
-    gwhere = f"{src} [generator]"
+
+def _generator_arguments(gtable: dict, head: _ProfileHeader, where: str,
+                         gwhere: str) -> tuple[str, dict[str, Any]]:
+    """(generator type, its keyword arguments) with the header's ramp and duration in."""
     gtype = gtable.get("type")
     if gtype not in _SPECS:
         raise _fail(gwhere, f"type = {gtype!r} is not one of {', '.join(_SPECS)}" if gtype is not None
                     else f"type is missing (one of {', '.join(_SPECS)})")
-    kw = _generator_kwargs(gtable, gtype, info, ramp_s, gwhere)
+    ramp_s, duration_s = head.ramp_s, head.duration_s
+    kw = _generator_kwargs(gtable, gtype, head.info, ramp_s, gwhere)
     if gtype in _TAPERED:
         kw["ramp_s"] = ramp_s if ramp_s is not None else _TAPERED[gtype]
     if gtype not in _INTRINSIC:
@@ -293,41 +311,67 @@ def profile_from_dict(doc: dict, *, source: str = "", base_dir: Path | None = No
         kw["duration_s"] = duration_s
     elif gtype in ("ramp", "triangle", "constant_velocity") and duration_s is not None:
         kw["duration_s"] = duration_s
+    return gtype, kw
+
+
+def _csv_samples(kw: dict[str, Any], head: _ProfileHeader, base_dir: Path | None, rate: float,
+                 gwhere: str) -> np.ndarray:
+    """A csv generator's column, converted to the target's units and resampled."""
+    path = Path(kw["file"])
+    if not path.is_absolute():
+        path = (base_dir or Path.cwd()) / path
+    values, times = _read_csv(path, kw["column"], kw["time_column"], gwhere)
+    units = kw["value_units"]
+    table = _CSV_UNITS[head.info.quantity]
+    if units is None:
+        factor = 1.0                      # in the profile's own units
+    elif units.lower() in table:
+        factor = table[units.lower()]
+    else:
+        raise _fail(gwhere, f"value_units = {units!r}: a {head.target} column may be in "
+                            f"{', '.join(table)}")
+    return gen.resample_series(values * factor * kw["scale"], times, ramp_s=kw["ramp_s"],
+                               rate=rate)
+
+
+def _generated(gtype: str, kw: dict[str, Any], head: _ProfileHeader, base_dir: Path | None,
+               rate: float, gwhere: str) -> np.ndarray:
+    """The generator's samples; its errors name the [generator] table."""
     try:
         if gtype == "csv":
-            path = Path(kw["file"])
-            if not path.is_absolute():
-                path = (base_dir or Path.cwd()) / path
-            values, times = _read_csv(path, kw["column"], kw["time_column"], gwhere)
-            units = kw["value_units"]
-            table = _CSV_UNITS[info.quantity]
-            if units is None:
-                factor = 1.0                      # in the profile's own units
-            elif units.lower() in table:
-                factor = table[units.lower()]
-            else:
-                raise _fail(gwhere, f"value_units = {units!r}: a {target} column may be in "
-                                    f"{', '.join(table)}")
-            x = gen.resample_series(values * factor * kw["scale"], times, ramp_s=kw["ramp_s"],
-                                    rate=rate)
-        else:
-            fn: Callable[..., np.ndarray] = {
-                "step": gen.step, "ramp": gen.ramp, "triangle": gen.triangle,
-                "constant_velocity": gen.constant_velocity, "sine": gen.sine,
-                "swept_sine": gen.swept_sine, "noise": gen.band_limited_noise,
-                "prbs": gen.prbs, "multisine": gen.multisine}[gtype]
-            x = fn(**kw, rate=rate)
+            return _csv_samples(kw, head, base_dir, rate, gwhere)
+        fn: Callable[..., np.ndarray] = {
+            "step": gen.step, "ramp": gen.ramp, "triangle": gen.triangle,
+            "constant_velocity": gen.constant_velocity, "sine": gen.sine,
+            "swept_sine": gen.swept_sine, "noise": gen.band_limited_noise,
+            "prbs": gen.prbs, "multisine": gen.multisine}[gtype]
+        return fn(**kw, rate=rate)
     except gen.GeneratorError as exc:
         raise _fail(gwhere, str(exc)) from None
+
+
+def profile_from_dict(doc: dict, *, source: str = "", base_dir: Path | None = None,
+                      rate: float = RATE_HZ) -> Profile:
+    """A Profile from a parsed profile document ({'profile': …, 'generator': …}); errors
+    are ProfileFileError naming `source` and the field."""
+    src = source or "profile"
+    ptable, gtable = _tables(doc, src)
+    where = f"{src} [profile]"
+    head = _profile_header(ptable, where)
+    gwhere = f"{src} [generator]"
+    gtype, kw = _generator_arguments(gtable, head, where, gwhere)
+    x = _generated(gtype, kw, head, base_dir, rate, gwhere)
+    duration_s = head.duration_s
     if gtype in ("prbs", "multisine", "csv") and duration_s is not None:
+        # these make their own length: a longer duration holds the last value
         n = int(round(duration_s * rate))
         if n < len(x):
             raise _fail(where, f"duration_s = {duration_s:g} s is shorter than the {gtype} "
                                f"({len(x) / rate:g} s): leave it out or lengthen it")
         x = np.concatenate([x, np.full(n - len(x), x[-1])])
-    return Profile(name=name, target=target, units=info.units, samples=x.astype(np.float32),
-                   rate=rate, description=description, source=source, origin=origin,
-                   generator=dict(gtable))
+    return Profile(name=head.name, target=head.target, units=head.info.units,
+                   samples=x.astype(np.float32), rate=rate, description=head.description,
+                   source=source, origin=head.origin, generator=dict(gtable))
 
 
 def load_profile(path: str | Path, dictionary: Dictionary | None = None, *,
