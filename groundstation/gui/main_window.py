@@ -37,21 +37,38 @@ class MainWindow(QMainWindow):
         self.settings = settings or QSettings("groundstation", "groundstation")
         self.setWindowTitle("Ground station - hybrid flexure bearing testbed")
         self.setAcceptDrops(True)
-        d = session.d
-        testbeds = [str(p.relative_to(TESTBEDS_DIR.parent.parent)) if p.is_relative_to(TESTBEDS_DIR.parent.parent)
-                    else str(p) for p in sorted(TESTBEDS_DIR.glob("*.toml"))]
-        self.connection = ConnectionBar(session, testbeds)
+        self._link_bars()
+        self._panels()
+        self._docks()
+        self._status_line()
+        self._follow_campaigns()
+        self._demo_bar()
+        self._menus()
+        self._abort_key()
+        self.charts.set_layout(DEFAULT_LAYOUT)
+        self.restore()
+
+    # ------------------------------------------------------------------ building the window
+    def _link_bars(self) -> None:
+        """The connection bar at the top; the replay bar at the bottom, shown during a replay."""
+        root = TESTBEDS_DIR.parent.parent
+        testbeds = [str(p.relative_to(root)) if p.is_relative_to(root) else str(p)
+                    for p in sorted(TESTBEDS_DIR.glob("*.toml"))]
+        self.connection = ConnectionBar(self.session, testbeds)
         bar = QToolBar("Connection")
         bar.setObjectName("connection_bar")
         bar.addWidget(self.connection)
         self.addToolBar(Qt.ToolBarArea.TopToolBarArea, bar)
-        self.replay_bar = ReplayBar(session)
+        self.replay_bar = ReplayBar(self.session)
         self.replay_toolbar = QToolBar("Replay")
         self.replay_toolbar.setObjectName("replay_bar")
         self.replay_toolbar.addWidget(self.replay_bar)
         self.addToolBar(Qt.ToolBarArea.BottomToolBarArea, self.replay_toolbar)
         self.replay_toolbar.setVisible(False)
 
+    def _panels(self) -> None:
+        """The strip charts in the middle and every panel the docks hold."""
+        session, d = self.session, self.session.d
         self.charts = StripChartPanel(session.store, d)
         self.setCentralWidget(self.charts)
         self.tree = ChannelTree(d)
@@ -71,52 +88,57 @@ class MainWindow(QMainWindow):
         self.analysis = AnalysisPanel(session)
         # the one-click demo on the simulated testbed (through the two docks above)
         self.demo = DemoController(session, self.parameters, self.profiles, self.charts, parent=self)
+
+    def _docks(self) -> None:
+        """One dock per panel; the bottom ones tabbed behind the event log."""
+        left, right = Qt.DockWidgetArea.LeftDockWidgetArea, Qt.DockWidgetArea.RightDockWidgetArea
+        bottom = Qt.DockWidgetArea.BottomDockWidgetArea
         self.docks = {}
-        for name, widget, area in (("Channels", self.tree, Qt.DockWidgetArea.LeftDockWidgetArea),
-                                   ("Commands", self.commands, Qt.DockWidgetArea.RightDockWidgetArea),
-                                   ("Status and limits", self.status_panel, Qt.DockWidgetArea.RightDockWidgetArea),
-                                   ("Recording", self.recording, Qt.DockWidgetArea.LeftDockWidgetArea),
-                                   ("Events", self.events, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Spectrum", self.spectrum, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Parameters", self.parameters, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Generator", self.generator, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Profiles", self.profiles, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Campaign", self.campaign, Qt.DockWidgetArea.BottomDockWidgetArea),
-                                   ("Analysis", self.analysis, Qt.DockWidgetArea.BottomDockWidgetArea)):
+        for name, widget, area in (("Channels", self.tree, left),
+                                   ("Commands", self.commands, right),
+                                   ("Status and limits", self.status_panel, right),
+                                   ("Recording", self.recording, left),
+                                   ("Events", self.events, bottom),
+                                   ("Spectrum", self.spectrum, bottom),
+                                   ("Parameters", self.parameters, bottom),
+                                   ("Generator", self.generator, bottom),
+                                   ("Profiles", self.profiles, bottom),
+                                   ("Campaign", self.campaign, bottom),
+                                   ("Analysis", self.analysis, bottom)):
             dock = QDockWidget(name)
             dock.setObjectName(name.lower().replace(" ", "_"))
             dock.setWidget(widget)
             self.addDockWidget(area, dock)
             self.docks[name] = dock
-        self.tabifyDockWidget(self.docks["Events"], self.docks["Spectrum"])
-        self.tabifyDockWidget(self.docks["Events"], self.docks["Parameters"])
-        self.tabifyDockWidget(self.docks["Events"], self.docks["Generator"])
-        self.tabifyDockWidget(self.docks["Events"], self.docks["Profiles"])
-        self.tabifyDockWidget(self.docks["Events"], self.docks["Campaign"])
-        self.tabifyDockWidget(self.docks["Events"], self.docks["Analysis"])
+        for name in ("Spectrum", "Parameters", "Generator", "Profiles", "Campaign", "Analysis"):
+            self.tabifyDockWidget(self.docks["Events"], self.docks[name])
         self.docks["Events"].raise_()
         # the limit table's channel names in full by default (a saved layout wins)
         self.status_panel.refresh()
         self.resizeDocks([self.docks["Status and limits"]],
                          [min(self.status_panel.preferred_width(), 480)], Qt.Orientation.Horizontal)
 
+    def _status_line(self) -> None:
+        """The link's state in the status bar; the window follows the data's source."""
         self.link_label = QLabel("not connected")
         self.statusBar().addPermanentWidget(self.link_label)
-        session.sig_link_state.connect(lambda s, m: self.link_label.setText(f"link {s} {m}".strip()))
-        session.sig_source.connect(self._source_changed)
+        self.session.sig_link_state.connect(
+            lambda s, m: self.link_label.setText(f"link {s} {m}".strip()))
+        self.session.sig_source.connect(self._source_changed)
+
+    def _follow_campaigns(self) -> None:
         # while a campaign runs it owns the device: the manual controls that would fight
         # it are off (ABORT never is)
-        session.campaign.sig_started.connect(lambda *_: self._campaign_running(True))
-        session.campaign.sig_finished.connect(lambda *_: self._campaign_running(False))
-        session.campaign.sig_failed.connect(lambda *_: self._campaign_running(False))
-        self._demo_bar()
-        self._menus()
+        runner = self.session.campaign
+        runner.sig_started.connect(lambda *_: self._campaign_running(True))
+        runner.sig_finished.connect(lambda *_: self._campaign_running(False))
+        runner.sig_failed.connect(lambda *_: self._campaign_running(False))
+
+    def _abort_key(self) -> None:
         # Abort: one key from anywhere in the application, whatever has the focus
         self.abort_shortcut = QShortcut(QKeySequence(Qt.Key.Key_Escape), self)
         self.abort_shortcut.setContext(Qt.ShortcutContext.ApplicationShortcut)
         self.abort_shortcut.activated.connect(self.abort)
-        self.charts.set_layout(DEFAULT_LAYOUT)
-        self.restore()
 
     # ------------------------------------------------------------------ menus
     def _menus(self) -> None:

@@ -6,8 +6,8 @@ traversal of one scene instead of one per plot, and the view's fixed costs (the 
 event, the scene's item lookup, the background, pyqtgraph's prepare-for-paint
 callbacks) are paid once a frame, not four times.
 
-The column knows nothing about channels or data: `StripChartPanel` (through its plot
-stack) puts `ChartPlot`s in and takes them out; their heights behave as a splitter's
+The column knows nothing about channels or data: the panel's `PlotStack`
+(charts/stack.py) puts `ChartPlot`s in and takes them out; their heights behave as a splitter's
 did: `sizes()` and `setSizes()` in pixels, a new plot gets an average share, a plot
 never shrinks below its minimum height, a resize keeps the proportions.
 """
