@@ -73,7 +73,7 @@ def _whole(path: str):
     """Every column the metrics need, the whole log at once, and the testbed constants."""
     import math
 
-    from groundstation.analysis.log_metrics import frame_steps
+    from groundstation.analysis.frame_gaps import frame_steps
     from groundstation.logs import LogReader
     from groundstation.plant.testbed import load_testbed
 

@@ -22,7 +22,8 @@ from groundstation import Testbed
 from groundstation.analysis import (AnalysisError, analyze_log, control_energy, los_jitter, psd,
                                     sensor_valid)
 from groundstation.analysis import log_metrics
-from groundstation.analysis.log_metrics import figures_from_testbed, frame_steps, missing_before
+from groundstation.analysis.frame_gaps import frame_steps, missing_before
+from groundstation.analysis.testbed_figures import figures_from_testbed
 from groundstation.cli.main import main
 from groundstation.logs import LogError, LogReader
 from groundstation.plant.testbed import load_testbed

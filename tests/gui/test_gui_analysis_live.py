@@ -18,7 +18,7 @@ from PySide6.QtCore import Qt
 
 from groundstation.analysis import AnalysisError, analyze_log, control_energy, los_jitter, psd
 from groundstation.analysis.jitter import sensor_valid
-from groundstation.analysis.log_metrics import frame_steps, missing_before
+from groundstation.analysis.frame_gaps import frame_steps, missing_before
 from groundstation.codec import FrameCodec, StreamDeframer
 from groundstation.live.display_buffers import TelemetryStore
 from groundstation.gui.analysis.live import LiveSnapshot, live_metrics, take_snapshot
