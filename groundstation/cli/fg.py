@@ -339,40 +339,46 @@ def _cmd_upload(args) -> int:
         stop_watching()
 
 
-def _journal_motion(reader):
+def _journal_motion(reader) -> tuple:
     """From the log's journal of the function generator (written by the GUI): the last
-    upload's settings and the device times where its motion started and stopped."""
+    upload (a GeneratorJournalRecord), the device times where its motion started and
+    stopped, and notes on the records left out because they do not follow the schema."""
+    from ..instruments.generator_journal import (JOURNAL_KIND, GeneratorJournalError,
+                                                 GeneratorJournalRecord)
     from ..logs.opening import LogQueryError
 
     try:
-        records = reader.journal("function_generator")
+        entries = reader.journal(JOURNAL_KIND)
     except LogQueryError:
-        return None, None, None
-    upload, start, end, on = None, None, None, {}
-    for rec in records:
-        d = rec.data
-        action = d.get("action")
-        t = d.get("device_time")
+        return None, None, None, []
+    upload, start, end, on, notes = None, None, None, {}, []
+    for i, entry in enumerate(entries):
+        try:
+            rec = GeneratorJournalRecord.from_record(entry.data)
+        except GeneratorJournalError as exc:
+            notes.append(f"journal record {i + 1} of {len(entries)} left out: {exc}")
+            continue
+        t = rec.device_time
         if t is None:
-            t = _host_to_device(reader, rec.time)
-        if action == "upload":
-            upload, start, end = d, None, None
-            if on.get(d.get("channel")):          # uploading while on restarts the motion
+            t = _host_to_device(reader, entry.time)
+        if rec.action == "upload":
+            upload, start, end = rec, None, None
+            if on.get(rec.channel):               # uploading while on restarts the motion
                 start = t
-        elif action == "output":
-            ch = d.get("channel")
+        elif rec.action == "output":
+            ch = rec.channel
             was = on.get(ch, False)
-            on[ch] = bool(d.get("on"))
-            if upload is not None and ch == upload.get("channel"):
+            on[ch] = rec.on
+            if upload is not None and ch == upload.channel:
                 if on[ch] and not was:
                     start, end = t, None
                 elif was and not on[ch] and start is not None:
                     end = t
-        elif action in ("abort", "close"):
-            if upload is not None and on.get(upload.get("channel")) and start is not None:
+        elif rec.action in ("abort", "close"):
+            if upload is not None and on.get(upload.channel) and start is not None:
                 end = t
             on = {}
-    return upload, start, end
+    return upload, start, end, notes
 
 
 def _host_to_device(reader, host_time: float) -> float | None:
@@ -396,12 +402,13 @@ def _cmd_check(args) -> int:
         if "HIGH_RATE" not in reader.packets() or not reader.n_frames("HIGH_RATE"):
             raise GroundStationError(f"{args.log}: no HIGH_RATE telemetry recorded (nothing "
                                      f"to check)")
-        upload, start, end = _journal_motion(reader)
+        upload, start, end, notes = _journal_motion(reader)
+        for note in notes:
+            print(f"note: {note}")
         if upload is not None:
-            profile = _profile(args, testbed, upload.get("duration_s"), upload.get("seed"),
-                               None if upload.get("target_rms_rad") is None
-                               else upload["target_rms_rad"] * 1e3, upload.get("precompensated"))
-            journaled = Path(str(upload.get("psd_source", ""))).name
+            profile = _profile(args, testbed, upload.duration_s, upload.seed,
+                               upload.target_rms_rad * 1e3, upload.precompensated)
+            journaled = Path(upload.psd_source).name
             if journaled and journaled != Path(args.profile).name:
                 print(f"note: the log's journal says {journaled} was uploaded, not "
                       f"{Path(args.profile).name}")
@@ -467,48 +474,72 @@ def _fraction(text: str) -> float:
     return value
 
 
-def add_parsers(sub) -> None:
-    fg = sub.add_parser("fg", help="the base-motion function generator (B&K 4053B, VISA)",
-                        description=__doc__,
-                        formatter_class=argparse.RawDescriptionHelpFormatter)
-    fsub = fg.add_subparsers(dest="fg_command", required=True)
+def _common_arguments(p, resource: bool = True) -> None:
+    """--backend, and with `resource` the generator's --resource, --testbed, --timeout."""
+    if resource:
+        p.add_argument("--resource", required=True,
+                       help="VISA resource, or 'sim' to start the simulated testbed with "
+                            "its generator for this command")
+    p.add_argument("--backend", default=None,
+                   help="pyvisa backend: @py (default), @ivi (vendor VISA) or a pyvisa-sim "
+                        "FILE.yaml")
+    if resource:
+        p.add_argument("--testbed", default=None,
+                       help="testbed file whose [limits] apply (default: "
+                            "profiles/testbeds/inertial_2dof.toml)")
+        p.add_argument("--timeout", type=_positive, default=5.0, help="VISA timeout, s")
 
-    def common(p, resource: bool = True):
-        if resource:
-            p.add_argument("--resource", required=True,
-                           help="VISA resource, or 'sim' to start the simulated testbed with "
-                                "its generator for this command")
-        p.add_argument("--backend", default=None,
-                       help="pyvisa backend: @py (default), @ivi (vendor VISA) or a pyvisa-sim "
-                            "FILE.yaml")
-        if resource:
-            p.add_argument("--testbed", default=None,
-                           help="testbed file whose [limits] apply (default: "
-                                "profiles/testbeds/inertial_2dof.toml)")
-            p.add_argument("--timeout", type=_positive, default=5.0, help="VISA timeout, s")
 
-    def channel(p):
-        p.add_argument("--channel", type=int, choices=(1, 2), default=1)
+def _channel_argument(p) -> None:
+    p.add_argument("--channel", type=int, choices=(1, 2), default=1)
 
-    def output(p):
-        p.add_argument("--output", choices=("on", "off"), default="off",
-                       help="on: switch the output on after setting (for --hold s), then off")
-        p.add_argument("--hold", type=_non_negative, default=None,
-                       help="with --output on: seconds to keep the output on (default: until "
-                            "Ctrl-C)")
 
+def _output_arguments(p) -> None:
+    p.add_argument("--output", choices=("on", "off"), default="off",
+                   help="on: switch the output on after setting (for --hold s), then off")
+    p.add_argument("--hold", type=_non_negative, default=None,
+                   help="with --output on: seconds to keep the output on (default: until "
+                        "Ctrl-C)")
+
+
+def _profile_arguments(p, journal_defaults: bool = False) -> None:
+    """The base-motion profile's PSD and synthesis; with `journal_defaults` the period
+    and the seed default to what a log's journal says was uploaded."""
+    later = " (default: what the log's journal says was uploaded, else {})"
+    p.add_argument("--profile", required=True, help="PSD table (profiles/base_motion/BM1.csv)")
+    p.add_argument("--duration", type=float, default=None if journal_defaults else 60.0,
+                   help="one waveform period, s" + (later.format(60) if journal_defaults else ""))
+    p.add_argument("--seed", type=int, default=None if journal_defaults else 0,
+                   help="random phases (same seed, same profile)"
+                        + (later.format(0) if journal_defaults else ""))
+    p.add_argument("--rms-mrad", type=float, default=None,
+                   help="target base RMS (default: the PSD table's own)")
+    p.add_argument("--no-precompensate", action="store_true",
+                   help="divide by the stage's DC gain only (no resonance compensation)")
+
+
+def _verdict_arguments(p) -> None:
+    p.add_argument("--tolerance", type=_fraction, default=DEFAULT_TOLERANCE,
+                   help="largest |achieved/target - 1| of the RMS that passes (default 0.1)")
+    p.add_argument("--csv", default=None, metavar="FILE",
+                   help="write the CSP curves (frequency_hz, target_csp_rad2, "
+                        "achieved_csp_rad2) to FILE")
+
+
+def _add_instrument_commands(fsub) -> None:
+    """list, identify and set: the instrument and its basic waves."""
     s = fsub.add_parser("list", help="list the VISA resources a backend sees")
-    common(s, resource=False)
+    _common_arguments(s, resource=False)
     s.add_argument("--query", default="?*::INSTR", help="VISA resource pattern")
     s.set_defaults(func=_cmd_list)
 
     s = fsub.add_parser("identify", help="*IDN? and both channels' settings")
-    common(s)
+    _common_arguments(s)
     s.set_defaults(func=_cmd_identify)
 
     s = fsub.add_parser("set", help="set a channel's basic wave (checked against the limits)")
-    common(s)
-    channel(s)
+    _common_arguments(s)
+    _channel_argument(s)
     s.add_argument("--waveform", type=str.upper, choices=("SINE", "SQUARE", "RAMP", "DC", "ARB"))
     s.add_argument("--frequency", type=float, help="Hz")
     s.add_argument("--amplitude", type=float, help="Vpp into the set load")
@@ -516,42 +547,25 @@ def add_parsers(sub) -> None:
     s.add_argument("--phase", type=float, help="deg")
     s.add_argument("--load", choices=("HZ", "50"), type=str.upper,
                    help="load the amplitude refers to (the stage amplifier: HZ)")
-    output(s)
+    _output_arguments(s)
     s.set_defaults(func=_cmd_set)
 
-    def profile(p, journal_defaults: bool = False):
-        later = " (default: what the log's journal says was uploaded, else {})"
-        p.add_argument("--profile", required=True, help="PSD table (profiles/base_motion/BM1.csv)")
-        p.add_argument("--duration", type=float, default=None if journal_defaults else 60.0,
-                       help="one waveform period, s" + (later.format(60) if journal_defaults else ""))
-        p.add_argument("--seed", type=int, default=None if journal_defaults else 0,
-                       help="random phases (same seed, same profile)"
-                            + (later.format(0) if journal_defaults else ""))
-        p.add_argument("--rms-mrad", type=float, default=None,
-                       help="target base RMS (default: the PSD table's own)")
-        p.add_argument("--no-precompensate", action="store_true",
-                       help="divide by the stage's DC gain only (no resonance compensation)")
 
-    def verdict(p):
-        p.add_argument("--tolerance", type=_fraction, default=DEFAULT_TOLERANCE,
-                       help="largest |achieved/target - 1| of the RMS that passes (default 0.1)")
-        p.add_argument("--csv", default=None, metavar="FILE",
-                       help="write the CSP curves (frequency_hz, target_csp_rad2, "
-                            "achieved_csp_rad2) to FILE")
-
+def _add_profile_commands(fsub) -> None:
+    """upload and check: a base-motion profile played, and its achieved motion judged."""
     s = fsub.add_parser("upload", help="synthesise a base-motion profile from a PSD and upload it")
-    common(s)
-    channel(s)
-    profile(s)
+    _common_arguments(s)
+    _channel_argument(s)
+    _profile_arguments(s)
     s.add_argument("--name", default=None, help="waveform name on the instrument")
-    output(s)
+    _output_arguments(s)
     s.add_argument("--check", action="store_true",
                    help="with --output on: watch the base encoder during the hold and compare "
                         "its last settled period with the target")
     s.add_argument("--device", default=None, metavar="ADDRESS",
                    help="with --check: the device whose telemetry carries the base encoder "
                         "(default with --resource sim: the simulated testbed)")
-    verdict(s)
+    _verdict_arguments(s)
     s.set_defaults(func=_cmd_upload)
 
     s = fsub.add_parser("check", help="a recorded log's base motion against a profile's target",
@@ -561,16 +575,25 @@ def add_parsers(sub) -> None:
                                     "journal) or before --end / the end of the log.  Exit 0 "
                                     "within --tolerance, 1 not, 2 unreadable log or profile.")
     s.add_argument("log", help="a ground-station log (.h5)")
-    profile(s, journal_defaults=True)
+    _profile_arguments(s, journal_defaults=True)
     s.add_argument("--testbed", default=None,
                    help="testbed whose base-stage model made the profile (default: "
                         "profiles/testbeds/inertial_2dof.toml)")
     s.add_argument("--end", type=_non_negative, default=None, metavar="S",
                    help="the window ends S seconds after the start of the log")
     s.add_argument("--periods", type=int, default=1, help="whole waveform periods to compare")
-    verdict(s)
+    _verdict_arguments(s)
     s.set_defaults(func=_cmd_check)
 
+
+def add_parsers(sub) -> None:
+    """The `fg` command and its subcommands, on the main parser's subparsers `sub`."""
+    fg = sub.add_parser("fg", help="the base-motion function generator (B&K 4053B, VISA)",
+                        description=__doc__,
+                        formatter_class=argparse.RawDescriptionHelpFormatter)
+    fsub = fg.add_subparsers(dest="fg_command", required=True)
+    _add_instrument_commands(fsub)
+    _add_profile_commands(fsub)
     s = fsub.add_parser("off", help="switch both outputs off")
-    common(s)
+    _common_arguments(s)
     s.set_defaults(func=_cmd_off)

@@ -40,6 +40,7 @@ from ...basemotion import BaseMotionProfile, BaseStageModel, PsdTable, load_psd,
 from ...core.errors import GroundStationError
 from ...instruments import (BasicWave, FunctionGenerator4050, InstrumentLinkError, SafetyLimits,
                             SettingRefusedError, list_resources)
+from ...instruments.generator_journal import JOURNAL_KIND, GeneratorJournalRecord
 from ...instruments.spec4050 import arb_name_for
 from ...plant.testbed import DEFAULT_TESTBED, Testbed, load_testbed
 from ...station.rig import open_testbed_generator
@@ -178,8 +179,8 @@ class GeneratorController(QObject):
     def _record(self, action: str, data: dict, blob: bytes = b"") -> None:
         if self._journal is not None:
             try:
-                self._journal("function_generator", {"action": action, "resource": self.resource,
-                                                     **data}, blob)
+                record = GeneratorJournalRecord(action=action, resource=self.resource, **data)
+                self._journal(JOURNAL_KIND, record.to_record(), blob)
             except Exception as exc:       # the journal must never stop the instrument
                 log.warning("journal: %s", exc)
 
