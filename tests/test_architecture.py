@@ -229,3 +229,26 @@ def test_the_window_session_imports_no_widgets():
             offenders += [f"{path.relative_to(PKG).as_posix()}:{node.lineno}: {n}" for n in names
                           if any(n == m or n.startswith(m + ".") for m in WIDGET_MODULES)]
     assert not offenders, offenders
+
+
+#: the longest a function may be, in lines from its `def` to its last line
+MAX_FUNCTION_LINES = 80
+#: where longer functions stand: the simulator's compiled core, written as one loop per
+#: tick for numba, where a call per step would cost what the compilation saves
+LONG_FUNCTIONS_ALLOWED = ("sim/core.py",)
+
+
+def test_no_function_is_over_80_lines():
+    """A function says one thing: past 80 lines it is several, and is split into named
+    helpers (or a small class) - methods and nested functions count on their own."""
+    long = []
+    for path in sorted(PKG.rglob("*.py")):
+        name = path.relative_to(PKG).as_posix()
+        if name in LONG_FUNCTIONS_ALLOWED:
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                lines = node.end_lineno - node.lineno + 1
+                if lines > MAX_FUNCTION_LINES:
+                    long.append(f"{name}:{node.lineno}: {node.name} ({lines} lines)")
+    assert not long, "\n".join(long)
