@@ -26,11 +26,9 @@ writes beside the report:
     NAME.html            all of it in one self-contained page (the PNGs embedded)
     NAME.txt             the report's summary, then the comparison in words
 
-Where the window starts.  A mark step writes an event (source "script") to the log's
-journal, stamped with the host's clock; frames carry both clocks.  The window starts at
-the device time of the last HIGH_RATE frame the host had received when the mark was
-written - the device time the rig had reached at the mark (within one frame on the
-simulator, within the link's latency on a rig).
+The pieces: scoring.py scores one log (its window, from a mark step, and its row),
+comparison.py compares the rows, metrics_words.py says it all in words; this module
+collects the rows of a report and writes the outputs.
 """
 
 from __future__ import annotations
@@ -38,26 +36,17 @@ from __future__ import annotations
 import csv
 import io
 import json
-import logging
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..core.errors import GroundStationError
+from .comparison import cell_text, compare
+from .metrics_words import (csv_variable, describe, group_text, invalid_reason, label,
+                            mode_sentence, mode_text, row_valid, seconds, unit,
+                            validity_sentence, verdict)
 from .model import AnalysisSpec, Campaign
-from .reading import run_names
 from .report import CampaignReport
-
-log = logging.getLogger(__name__)
-
-PACKET = "HIGH_RATE"
-#: the figures compared: key in LogMetrics.row() -> (what it is, unit)
-COMPARED = {"std_urad": ("jitter (std)", "urad"),
-            "highpass_rms_urad": ("jitter (high-pass RMS)", "urad"),
-            "energy_total_j": ("control energy", "J")}
-#: a window this much shorter than the baseline's makes energies incomparable (said so)
-WINDOW_TOLERANCE = 0.05
+from .scoring import make_row, score_log_with_results
 
 
 @dataclass
@@ -206,15 +195,15 @@ def campaign_metrics(report: CampaignReport, campaign: Campaign | None = None, *
         for part, f in enumerate(files, 1):
             if folder is not None and not Path(f).exists() and (Path(folder) / Path(f).name).exists():
                 f = str(Path(folder) / Path(f).name)
-            row, data[len(rows)] = _score(f, spec, report.campaign, run, variables,
+            row, data[len(rows)] = score_log_with_results(f, spec, report.campaign, run, variables,
                                           recording=str(rec.get("name", "")),
                                           part=part if len(files) > 1 else None,
                                           run_status=run_status(report, run),
                                           design_dir=campaign.path.parent if campaign else None)
             rows.append(row)
         if not files:
-            rows.append(_row(str(rec.get("name", "")), "", None, run, variables, run_status(report, run),
-                             error="the recording wrote no file"))
+            rows.append(make_row(str(rec.get("name", "")), "", None, run, variables,
+                                 run_status(report, run), error="the recording wrote no file"))
     notes = []
     if untagged:
         notes.append(f"{untagged} recording(s) in the report carry no run or matrix values (a report "
@@ -240,381 +229,6 @@ def run_status(report: CampaignReport, run: int) -> str:
     if report.failed_run == run:
         return f"{report.status}: {report.reason.splitlines()[0] if report.reason else ''}".rstrip(": ")
     return "incomplete"
-
-
-def _row(recording: str, file: str, part: int | None, run: int, variables: dict[str, Any],
-         status: str, *, window: dict[str, Any] | None = None, metrics: dict[str, Any] | None = None,
-         notes: str = "", error: str = "") -> dict[str, Any]:
-    return {"run": run, "run_status": status, "recording": recording, "file": file, "part": part,
-            "variables": variables,
-            "window": window or {"start": "", "mark": "", "start_s": None, "stop_s": None},
-            "metrics": metrics or {}, "notes": notes, "error": error, "reference": {},
-            "reference_error": ""}
-
-
-def score_log(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
-              variables: dict[str, Any] | None = None, *, recording: str = "",
-              part: int | None = None, run_status: str = "",
-              design_dir: Path | None = None) -> dict[str, Any]:
-    """One log's row: its window found, `analyze_log` over it; whatever goes wrong is the
-    row's `error` (the log unreadable, a channel missing, an empty window).  The
-    reference metrics of `spec.metrics` join it (their failure: `reference_error`)."""
-    return _score(path, spec, campaign, run, variables, recording=recording, part=part,
-                  run_status=run_status, design_dir=design_dir)[0]
-
-
-def _score(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
-           variables: dict[str, Any] | None = None, *, recording: str = "",
-           part: int | None = None, run_status: str = "",
-           design_dir: Path | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(the row, the reference metrics' results for the figures)."""
-    row, unreadable = _score_jitter(path, spec, campaign, run, variables, recording=recording,
-                                    part=part, run_status=run_status, design_dir=design_dir)
-    if not spec.metrics or unreadable:
-        return row, {}
-    from .reference_metrics import add_to_row
-    return row, add_to_row(row, path, spec.metrics)
-
-
-def run_design(variables: dict[str, Any], design_dir: Path | None) -> str | Path | None:
-    """The design whose loop a run closed, for the mode check: the matrix's `design`
-    value when it names a design file (relative to the campaign file), None when it
-    names none ("open_loop": no loop, no check), "auto" without a `design` key (the last
-    design the log records uploading, if the loop was closed in the window)."""
-    if "design" not in variables:
-        return "auto"
-    v = variables["design"]
-    if not isinstance(v, str) or not v.endswith(".toml"):
-        return None
-    p = Path(v)
-    return p if p.is_absolute() or design_dir is None else design_dir / p
-
-
-def _score_jitter(path: str | Path, spec: AnalysisSpec, campaign: str = "", run: int = 0,
-                  variables: dict[str, Any] | None = None, *, recording: str = "",
-                  part: int | None = None, run_status: str = "",
-                  design_dir: Path | None = None) -> tuple[dict[str, Any], bool]:
-    """(the row of jitter and energy, whether the log could not be read at all)."""
-    from ..analysis import analyze_log
-    from ..logs import LogError
-
-    variables = dict(variables or {})
-    notes: list[str] = []
-    window = {"start": "log start", "mark": "", "start_s": None, "stop_s": None}
-    try:
-        if spec.start_after_mark:
-            target = mark_text(spec.start_after_mark, campaign, run, variables)
-            start, found = mark_start(path, target)
-            if start is None:
-                notes.append(f"no mark '{target}' in the log: the whole log is scored")
-                window["start"] = "log start (mark not found)"
-            else:
-                window.update(start="mark", mark=found, start_s=start,
-                              stop_s=None if spec.duration_s is None else start + spec.duration_s)
-        elif spec.duration_s is not None:
-            window.update(start_s=0.0, stop_s=spec.duration_s)
-        m = analyze_log(path, start_s=window["start_s"], stop_s=window["stop_s"], sensor=spec.sensor,
-                        integration_period_s=spec.integration_period_s,
-                        design=run_design(variables, design_dir))
-    except GroundStationError as exc:
-        return _row(recording, str(path), part, run, variables, run_status, window=window,
-                    notes="; ".join(notes), error=str(exc).strip() or type(exc).__name__), \
-            isinstance(exc, LogError)
-    except Exception as exc:            # a log this code did not foresee: a row, not a crash
-        log.exception("scoring %s", path)
-        return _row(recording, str(path), part, run, variables, run_status, window=window,
-                    notes="; ".join(notes), error=f"{type(exc).__name__}: {exc}"), True
-    row = m.row(spec.excluded_limit())
-    said = row.pop("notes", "")
-    if said:
-        notes.append(said)
-    error = row.pop("error", "") or ""
-    if window["stop_s"] is not None and window["start_s"] is not None:
-        scored = m.window_to_s - m.window_from_s + 1.0 / m.rate_hz
-        wanted = window["stop_s"] - window["start_s"]
-        if scored < wanted * (1 - WINDOW_TOLERANCE):
-            notes.append(f"the log ends {scored:.3g} s into the {wanted:g} s window")
-    return _row(recording, str(path), part, run, variables, run_status, window=window,
-                metrics=row, notes="; ".join(notes), error=error), False
-
-
-def mark_text(text: str, campaign: str, run: int, variables: dict[str, Any]) -> str:
-    """`start_after_mark` with the run's placeholders filled (as the mark step's were)."""
-    names = run_names(campaign, run, {k: v for k, v in variables.items() if not k.endswith("_stem")})
-    names.update(variables)
-    try:
-        return text.format(**names)
-    except (KeyError, IndexError, ValueError):
-        return text
-
-
-def mark_start(path: str | Path, text: str) -> tuple[float | None, str]:
-    """(seconds of device time from the log's start, the mark's text) of the first mark
-    step whose text is `text` (else the first that contains it); (None, '') if none."""
-    from ..logs import LogReader
-
-    with LogReader(path) as r:
-        marks = [e for e in r.journal("event")
-                 if e.data.get("source") == "script" and isinstance(e.data.get("text"), str)]
-        hit = next((e for e in marks if e.data["text"] == text), None) \
-            or next((e for e in marks if text in e.data["text"]), None)
-        if hit is None:
-            return None, ""
-        if PACKET not in r.packets() or not r.n_frames(PACKET):
-            return 0.0, hit.data["text"]
-        # rows whose host arrival time is at or before the mark: the last one is where
-        # the rig was when the mark was written
-        _, i1 = r.index_range(PACKET, None, hit.time, "host")
-        if i1 == 0:
-            return 0.0, hit.data["text"]
-        t = r.read_rows(PACKET, ["device_time"], i1 - 1, i1, with_time=False)["device_time"]
-        return float(t[0]) - r.origin("device"), hit.data["text"]
-
-
-# ---------------------------------------------------------------------- comparison
-def compare(rows: list[dict[str, Any]], spec: AnalysisSpec,
-            matrix: dict[str, list[Any]]) -> tuple[list[dict[str, Any]], list[str]]:
-    """One cell per (group value, compared value): the figures of its log and, relative
-    to the baseline's cell of the same group, their ratio and change in %."""
-    notes: list[str] = []
-    tagged = [r for r in rows if r["run"]]
-
-    def values(key: str) -> list[Any]:
-        if key in matrix:
-            return list(matrix[key])
-        return list(dict.fromkeys(r["variables"].get(key) for r in tagged if key in r["variables"]))
-
-    groups = values(spec.group_by) if spec.group_by else [None]
-    compared = values(spec.compare)
-    cells: list[dict[str, Any]] = []
-    for g in groups:
-        members = [r for r in tagged if g is None or r["variables"].get(spec.group_by) == g]
-        chosen: dict[int, dict[str, Any] | None] = {}
-        for i, c in enumerate(compared):
-            mine = [r for r in members if r["variables"].get(spec.compare) == c]
-            good = [r for r in mine if not r["error"]]
-            # a valid log first: a repeat that clipped must not hide one that measured
-            good.sort(key=lambda r: not row_valid(r))
-            chosen[i] = good[0] if good else (mine[0] if mine else None)
-            if len(mine) > 1:
-                notes.append(f"{len(mine)} logs for {spec.compare} = {label(c)}"
-                             + (f", {spec.group_by} = {label(g)}" if g is not None else "")
-                             + f": the first {'readable ' if good else ''}one is compared")
-        base_i = next((i for i, c in enumerate(compared) if c == spec.baseline), None)
-        base = chosen.get(base_i) if base_i is not None else None
-        for i, c in enumerate(compared):
-            cells.append(_cell(chosen[i], base, g, c, i == base_i))
-    return cells, notes
-
-
-def _cell(row: dict[str, Any] | None, base: dict[str, Any] | None, group: Any, value: Any,
-          is_baseline: bool) -> dict[str, Any]:
-    cell: dict[str, Any] = {"group": label(group) if group is not None else "all",
-                            "group_value": group, "compare": label(value), "compare_value": value,
-                            "baseline": is_baseline, "run": None, "run_status": "", "log": "",
-                            "window_s": None, "error": "", "valid": False, "invalid_reason": "",
-                            "excluded_fraction": None, "baseline_valid": None,
-                            "baseline_invalid_reason": ""}
-    notes: list[str] = []
-    if row is None:
-        notes.append("no log")
-        cell["invalid_reason"] = "no log"
-    else:
-        cell.update(run=row["run"], run_status=row["run_status"], log=Path(row["file"]).name,
-                    window_s=window_seconds(row), error=row["error"], valid=row_valid(row),
-                    invalid_reason=invalid_reason(row),
-                    excluded_fraction=finite(row["metrics"].get("excluded_fraction")))
-    if base is not None:
-        cell.update(baseline_valid=row_valid(base), baseline_invalid_reason=invalid_reason(base))
-    figures = row["metrics"] if row is not None and not row["error"] else {}
-    basefig = base["metrics"] if base is not None and not base["error"] else {}
-    # ratios only between two measurements: an invalid run (or baseline) is named, not ranked
-    comparable = cell["valid"] and (is_baseline or bool(cell["baseline_valid"]))
-    for key in COMPARED:
-        v, b = finite(figures.get(key)), finite(basefig.get(key))
-        cell[key] = v
-        ratio = None
-        if comparable and is_baseline and v is not None and v != 0:
-            ratio = 1.0
-        elif comparable and v is not None and b is not None and b != 0:
-            ratio = v / b
-        cell[f"{key}_ratio"] = ratio
-        cell[f"{key}_change_pct"] = None if ratio is None else (ratio - 1.0) * 100.0
-    missing = [what for key, (what, _) in COMPARED.items() if row is not None and not row["error"]
-               and cell[key] is None]
-    if missing:
-        notes.append(f"no {', '.join(missing)} (the log's row says why)")
-    if row is not None and not row["error"] and not cell["valid"]:
-        notes.append(f"not valid: {cell['invalid_reason']} - not compared")
-    elif not is_baseline and row is not None and not row["error"] and base is not None \
-            and not base["error"] and not cell["baseline_valid"]:
-        notes.append(f"the baseline's run is not valid ({cell['baseline_invalid_reason']}): "
-                     f"no ratio")
-    if not is_baseline and row is not None and not row["error"]:
-        if base is None or base["error"]:
-            notes.append("no baseline figures in this group: " + ("the baseline's log could not be "
-                                                                   "scored" if base else "no baseline log"))
-        else:
-            lacking = [what for key, (what, _) in COMPARED.items()
-                       if cell[key] is not None and finite(basefig.get(key)) in (None, 0.0)]
-            if lacking:
-                notes.append(f"the baseline has no (or a zero) {', '.join(lacking)}")
-            w, wb = window_seconds(row), window_seconds(base)
-            if w is not None and wb is not None and abs(w - wb) > WINDOW_TOLERANCE * max(w, wb):
-                notes.append(f"windows differ ({w:.3g} s vs the baseline's {wb:.3g} s): energies "
-                             f"are totals over unequal times")
-    cell["mode_share"] = finite(figures.get("mode_share"))
-    cell["mode_band_hz"] = figures.get("mode_band_hz")
-    cell["mode_frequency_hz"] = finite(figures.get("mode_frequency_hz"))
-    cell["mode_dominates"] = bool(figures.get("mode_dominates"))
-    if cell["mode_dominates"]:
-        notes.append(mode_text(cell))
-    if row is not None and row["run_status"] not in ("completed", ""):
-        notes.append(f"run {row['run']} {row['run_status'].split(':')[0]}")
-    cell["note"] = "; ".join(notes)
-    return cell
-
-
-# ---------------------------------------------------------------------- words
-def label(value: Any) -> str:
-    """A matrix value as the tables show it: a file by its name without extension."""
-    if isinstance(value, str):
-        return Path(value).stem or value
-    if isinstance(value, float) and value.is_integer():
-        return f"{value:g}"
-    return str(value)
-
-
-def describe(variables: dict[str, Any]) -> str:
-    shown = {k: v for k, v in variables.items() if not k.endswith("_stem")}
-    return ", ".join(f"{k}={label(v)}" for k, v in shown.items())
-
-
-def group_text(spec: AnalysisSpec, group: str, *, under: bool = False) -> str:
-    if not spec.group_by:
-        return "" if under else "all runs"
-    return f"{'under ' if under else ''}{spec.group_by} {group}"
-
-
-def csv_variable(key: str, fixed: set[str]) -> str:
-    return f"matrix_{key}" if key in fixed else key
-
-
-def finite(v: Any) -> float | None:
-    return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
-
-
-def num(v: Any) -> str:
-    return "n/a" if finite(v) is None else f"{v:.4g}"
-
-
-def unit(v: Any, name: str) -> str:
-    return "n/a" if finite(v) is None else f"{v:.4g} {name}"
-
-
-def pct(v: Any) -> str:
-    return "n/a" if finite(v) is None else f"{v:+.0f} %"
-
-
-def window_seconds(row: dict[str, Any]) -> float | None:
-    m = row["metrics"]
-    a, b = finite(m.get("from_s")), finite(m.get("to_s"))
-    return None if a is None or b is None else b - a
-
-
-def seconds(row: dict[str, Any]) -> str:
-    w = window_seconds(row)
-    return "n/a" if w is None else f"{w:.3g}"
-
-
-def cell_text(cell: dict[str, Any]) -> str:
-    if cell["error"]:
-        return f"ERROR {cell['error']}"
-    if cell["note"] == "no log":
-        return "no log"
-    parts = []
-    for key, (what, unit) in COMPARED.items():
-        s = f"{what} {num(cell[key])}" + (f" {unit}" if cell[key] is not None else "")
-        if not cell["baseline"] and cell[f"{key}_change_pct"] is not None:
-            s += f" ({pct(cell[f'{key}_change_pct'])})"
-        parts.append(s)
-    text = ", ".join(parts) + (" (baseline)" if cell["baseline"] else "")
-    return text + (f" - {cell['note']}" if cell["note"] else "")
-
-
-def row_valid(row: dict[str, Any]) -> bool:
-    """A row whose window is a measurement: scored without error and `valid` (its
-    excluded fraction within the limit)."""
-    return not row["error"] and row["metrics"].get("valid") is True
-
-
-def invalid_reason(row: dict[str, Any]) -> str:
-    """Why a row is not valid ('' if it is)."""
-    if row["error"]:
-        return f"not scored: {row['error']}"
-    if row["metrics"].get("valid") is True:
-        return ""
-    return str(row["metrics"].get("invalid_reason") or "no validity figure")
-
-
-def mode_text(figures: dict[str, Any]) -> str:
-    """'jitter dominated by the loop's mode at 22.8 Hz (82 % of its variance in
-    21.7-23.9 Hz)' from a row's figures or a cell ('' without a mode check)."""
-    share, band, f = (finite(figures.get("mode_share")), figures.get("mode_band_hz"),
-                      finite(figures.get("mode_frequency_hz")))
-    if share is None or not band or f is None:
-        return ""
-    where = f"{share * 100:.0f} % of its variance in {band[0]:.3g}-{band[1]:.3g} Hz"
-    if figures.get("mode_dominates"):
-        return f"jitter dominated by the loop's lightly damped mode at {f:.3g} Hz ({where})"
-    return f"mode check: {where} (the loop's mode at {f:.3g} Hz)"
-
-
-def mode_sentence(cell: dict[str, Any], where: str) -> str:
-    """'inertial_design1 under base_motion BM2: jitter dominated by ... - a limit cycle of
-    the loop, not base-motion rejection' ('' when the mode does not dominate)."""
-    if not cell.get("mode_dominates"):
-        return ""
-    return (f"{cell['compare']}" + (f" {where}" if where else "")
-            + f": {mode_text(cell)} - a limit cycle of the loop, not base-motion rejection")
-
-
-def validity_sentence(cell: dict[str, Any], baseline: str, where: str) -> str:
-    """'open_loop under base_motion BM2: not valid, 52 % of the window off the
-    autocollimator's range ...' for a cell left out of the comparison ('' otherwise)."""
-    head = f"{cell['compare']}" + (f" {where}" if where else "")
-    if cell["note"] == "no log" or cell["error"]:
-        return ""
-    if not cell["valid"]:
-        return f"{head}: not valid, {cell['invalid_reason']} - not ranked"
-    if not cell["baseline"] and cell["baseline_valid"] is False:
-        return (f"{head}: no comparison, the baseline {baseline} is not valid "
-                f"({cell['baseline_invalid_reason']})")
-    return ""
-
-
-def verdict(cell: dict[str, Any], baseline: str, where: str) -> str:
-    """'relative_design2 cuts jitter by 80 % and energy by 97 % vs relative_design1 under
-    ref 0.0001' ('' when a figure is missing, or either run is not valid).  Jitter is the
-    reference's metric, the high-pass RMS over the integration period; the standard
-    deviation (said so) only where the window has no settled high-pass figure."""
-    j, e = cell.get("highpass_rms_urad_change_pct"), cell["energy_total_j_change_pct"]
-    jitter = "jitter"
-    if j is None:
-        j, jitter = cell["std_urad_change_pct"], "jitter (std)"
-    if j is None or e is None:
-        return ""
-
-    def verb(change: float) -> str:
-        return "leaves" if round(change) == 0 else "cuts" if change < 0 else "raises"
-
-    def what(change: float, name: str) -> str:
-        return f"{name} unchanged (within 1 %)" if round(change) == 0 else f"{name} by {abs(change):.0f} %"
-    if verb(j) == verb(e):              # "cuts jitter by 60 % and energy by 95 %"
-        words = f"{verb(j)} {what(j, jitter)} and {what(e, 'energy')}"
-    else:
-        words = f"{verb(j)} {what(j, jitter)} and {verb(e)} {what(e, 'energy')}"
-    return f"{cell['compare']} {words} vs {baseline}" + (f" {where}" if where else "")
 
 
 # ---------------------------------------------------------------------- files
@@ -658,6 +272,4 @@ def write_metrics(metrics: CampaignMetrics, report: CampaignReport, report_path:
     return written
 
 
-__all__ = ["COMPARED", "CampaignMetrics", "campaign_metrics", "compare", "invalid_reason", "label",
-           "mark_start", "mode_sentence", "mode_text", "output_paths", "row_valid", "run_design",
-           "score_log", "validity_sentence", "write_metrics"]
+__all__ = ["CampaignMetrics", "campaign_metrics", "output_paths", "run_status", "write_metrics"]

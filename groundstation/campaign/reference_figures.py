@@ -30,7 +30,8 @@ from typing import Any
 
 import numpy as np
 
-from .metrics import CampaignMetrics, describe, num
+from .metrics import CampaignMetrics
+from .metrics_words import describe, num
 
 TITLES = {"step": "Step responses", "hysteresis": "Hysteresis loops",
           "slope_table": "Identified slope tables", "friction_velocity": "Friction against velocity",

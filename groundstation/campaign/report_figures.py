@@ -21,8 +21,10 @@ import math
 from pathlib import Path
 from typing import Any, Callable
 
-from .metrics import (COMPARED, CampaignMetrics, describe, group_text, mode_sentence, num, pct,
-                      row_valid, validity_sentence, verdict)
+from .comparison import COMPARED
+from .metrics import CampaignMetrics
+from .metrics_words import (describe, group_text, mode_sentence, num, pct, row_valid,
+                            validity_sentence, verdict)
 from .report import CampaignReport
 
 FIGURE_TITLES = {"jitter": "Jitter", "energy": "Control energy", "relative": "Relative to the baseline"}

@@ -10,7 +10,8 @@ import math
 import pytest
 
 from groundstation.analysis.validity import MAX_EXCLUDED_FRACTION, pct_text, window_validity
-from groundstation.campaign.metrics import CampaignMetrics, compare
+from groundstation.campaign.comparison import compare
+from groundstation.campaign.metrics import CampaignMetrics
 from groundstation.campaign.model import AnalysisSpec
 from groundstation.campaign.report import CampaignReport
 from groundstation.campaign.report_figures import html_page
