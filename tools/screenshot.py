@@ -22,7 +22,7 @@ from PySide6.QtWidgets import QApplication  # noqa: E402
 
 from groundstation.core.dictionary import load_dictionary  # noqa: E402
 from groundstation.gui.main_window import MainWindow  # noqa: E402
-from groundstation.gui.session import Session  # noqa: E402
+from groundstation.gui.session.session import Session  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 
