@@ -217,10 +217,10 @@ action = "generator_off"
     panel, session, fg = window.campaign, window.session, window.generator
     session.connect_sim(str(inertial))
     qtbot.waitUntil(lambda: connected(session), timeout=60000)
-    qtbot.waitUntil(fg.select_simulator, timeout=30000)
-    qtbot.mouseClick(fg.connect_button, Qt.MouseButton.LeftButton)
-    qtbot.waitUntil(lambda: fg.state is not None, timeout=15000)
-    assert not fg.state.output.on
+    qtbot.waitUntil(fg.channel.select_simulator, timeout=30000)
+    qtbot.mouseClick(fg.channel.connect_button, Qt.MouseButton.LeftButton)
+    qtbot.waitUntil(lambda: fg.channel.state is not None, timeout=15000)
+    assert not fg.channel.state.output.on
     assert panel.set_file(path)
     panel.folder.setText(str(tmp_path / "logs"))
     assert panel.run() is None

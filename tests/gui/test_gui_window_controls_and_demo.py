@@ -228,7 +228,7 @@ def test_demo_moves_the_simulated_axis_and_esc_stops_it(qtbot, window):
     qtbot.waitUntil(lambda: ring(window).latest("armed") == 0 and ring(window).latest("mode") == 0
                     and ring(window).latest("current_coarse") == 0.0
                     and ring(window).latest("current_fine") == 0.0, timeout=10000)
-    qtbot.waitUntil(lambda: not window.session.profile_playing, timeout=10000)
+    qtbot.waitUntil(lambda: not window.session.profiles.playing, timeout=10000)
     assert "aborted" in window.demo_status.text().lower()
     assert "ABORT" in window.demo_status.toolTip()
 

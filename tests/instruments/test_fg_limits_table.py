@@ -204,15 +204,15 @@ def test_the_panel_shows_the_texts_next_to_its_fields(qtbot, dictionary, tmp_pat
     try:
         panel = GeneratorPanel(session)
         qtbot.addWidget(panel)
-        assert [panel.waveform.itemText(i) for i in range(panel.waveform.count())] == \
+        assert [panel.channel.waveform.itemText(i) for i in range(panel.channel.waveform.count())] == \
             list(spec.WAVEFORMS)
         for waveform in spec.WAVEFORMS:
             for load in spec.LOADS:
-                panel.waveform.setCurrentText(waveform)
-                panel.load.setCurrentIndex(panel.load.findData(load))
+                panel.channel.waveform.setCurrentText(waveform)
+                panel.channel.load.setCurrentIndex(panel.channel.load.findData(load))
                 limits = session.generator.safety_limits()
                 texts = limit_texts(waveform, load, limits)
-                for name, label in panel.ranges.items():
+                for name, label in panel.channel.ranges.items():
                     assert label.text() == texts[name]
     finally:
         session.shutdown()

@@ -497,13 +497,6 @@ class Session(QObject):
             return "a campaign is running: it owns the device until it ends"
         return self.profiles.play(station, profile, mode)
 
-    @property
-    def profile_playing(self) -> bool:
-        """Whether a profile is being uploaded or played.  The window's code asks
-        self.profiles.playing; this stays for tests/gui/test_gui_window_controls_and_demo.py,
-        outside this refactor's files."""
-        return self.profiles.playing
-
     # ------------------------------------------------------------------ recording
     def start_recording(self, folder: str, test_name: str, notes: str = "") -> Path | None:
         if self.recorder is not None and self.recorder.state == "recording":
