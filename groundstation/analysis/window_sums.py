@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.kinds import Setup
 from . import AnalysisError
 from .energy import EnergyAccumulator
 from .frame_gaps import frame_steps, missing_before
@@ -92,7 +93,7 @@ class WindowSums:
         jit, welch = self.jit, self.welch
         jitter = spectrum = None
         if jit is not None and jit.n and jit.lowest == jit.highest:
-            if setup == "relative" and sensor in LOS_SENSORS:
+            if setup == Setup.RELATIVE and sensor in LOS_SENSORS:
                 # the relative set-up has no IMU or mirror: the channel is a placeholder, and
                 # its constant is nothing measured - not a perfect line of sight
                 notes.append(f"no jitter or PSD: the {sensor} reads one constant value "

@@ -14,6 +14,7 @@ from __future__ import annotations
 import shlex
 from typing import Any
 
+from ..core.kinds import FastSim
 from .model import CampaignError
 
 #: option -> its value when neither the command line nor a report gives one
@@ -64,7 +65,7 @@ def describe(setup: dict[str, Any]) -> str:
     """'device sim, fast (simulator in its own process), seed 0, testbed FILE'."""
     parts = [f"device {setup['device']}"]
     if setup.get("fast"):
-        parts.append(f"fast (simulator {'in its own process' if setup.get('fast_sim') == 'process' else 'inline'})")
+        parts.append(f"fast (simulator {'in its own process' if setup.get('fast_sim') == FastSim.PROCESS else 'inline'})")
     parts.append(f"seed {setup.get('seed', 0)}")
     if setup.get("testbed"):
         parts.append(f"testbed {setup['testbed']}")
@@ -80,7 +81,7 @@ def resume_command(campaign_file: str, report_file: str, setup: dict[str, Any]) 
         words += ["--device", str(setup.get("device", "sim"))]
         if setup.get("fast"):
             words.append("--fast")
-            if setup.get("fast_sim", "process") != "process":
+            if setup.get("fast_sim", FastSim.PROCESS) != FastSim.PROCESS:
                 words += ["--fast-sim", str(setup["fast_sim"])]
         words += ["--seed", str(setup.get("seed", 0))]
         for key in ("testbed", "log_folder"):

@@ -51,6 +51,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from ..core.kinds import Setup
 from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import GroundStationError
 from ..core.tomlfile import read_toml
@@ -144,14 +145,14 @@ def _load(path: Path, chain: tuple[Path, ...]) -> ControllerDesign:
     if mode not in MODES:
         raise DesignError(f"{where}: design.mode = {mode!r}; allowed: \"relative\", \"inertial\"")
     testbed = _testbed(d, where)
-    if mode == "inertial" and not testbed.inertial:
+    if mode == Setup.INERTIAL and not testbed.inertial:
         raise DesignError(f"{where}: design.mode = \"inertial\" needs a testbed with a gyro "
                           f"(setup = \"inertial\"); {testbed.path.name} has setup = "
                           f"\"{testbed.setup}\"")
     prewarp = _number(d, "prewarp_hz", where, "design", required=False,
                       lo=0.0, hi=CONTROL_RATE_HZ / 2, open_lo=True, open_hi=True,
                       allowed=f"a frequency in Hz between 0 and {CONTROL_RATE_HZ / 2:g} (Nyquist)")
-    kp = _number(d, "outer_loop_gain_per_s", where, "design", required=(mode == "inertial"),
+    kp = _number(d, "outer_loop_gain_per_s", where, "design", required=(mode == Setup.INERTIAL),
                  lo=0.0, allowed="a gain >= 0 in 1/s (K_p of the outer position loop)")
     sat_coarse, sat_fine, anti_windup = _saturation(doc, where)
     friction = _friction(doc, where)

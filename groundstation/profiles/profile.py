@@ -38,6 +38,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..core.kinds import ProfileOrigin
 from ..core.dictionary import Dictionary
 from ..core.tomlfile import read_toml
 from . import waveforms as gen
@@ -280,9 +281,9 @@ def _profile_header(ptable: dict, where: str) -> _ProfileHeader:
     if not isinstance(description, str):
         raise _fail(where, "description must be a string")
     origin = ptable.get("origin", "relative" if target == "REFERENCE" else "absolute")
-    if origin not in ("absolute", "relative"):
+    if origin not in (ProfileOrigin.ABSOLUTE, ProfileOrigin.RELATIVE):
         raise _fail(where, f"origin must be 'absolute' or 'relative', not {origin!r}")
-    if origin == "relative" and target != "REFERENCE":
+    if origin == ProfileOrigin.RELATIVE and target != "REFERENCE":
         raise _fail(where, f"origin = 'relative' applies to REFERENCE profiles only: {target} "
                            f"starts from 0 after ARM")
     duration_s = _number(where, "duration_s", ptable["duration_s"]) if "duration_s" in ptable else None

@@ -17,6 +17,7 @@ from PySide6.QtCore import QObject, Qt
 from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QGridLayout, QGroupBox, QHBoxLayout,
                                QLabel, QPushButton, QVBoxLayout)
 
+from ...core.kinds import LinkState
 from ...core.errors import GroundStationError
 from ...instruments import spec4050 as spec
 from .limits_text import limit_texts, limits_source
@@ -253,7 +254,7 @@ class ChannelEditor(QObject):
         self._say(f"{resource} closed (outputs off)")
 
     def _on_link(self, state: str, _message: str) -> None:
-        if state in ("up", "closed"):
+        if state in (LinkState.UP, LinkState.CLOSED):
             self.refresh_resources()      # the simulator's generator comes and goes with it
 
     # ------------------------------------------------------------------ the basic wave

@@ -28,7 +28,7 @@ from PySide6.QtWidgets import (QComboBox, QGridLayout, QGroupBox, QHBoxLayout, Q
 
 from ...core.dictionary import Dictionary
 from ...core.errors import GroundStationError
-from ...core.kinds import LinkState
+from ...core.kinds import LinkState, ProfileOrigin
 from ...profiles import (TARGETS, Profile, ProfileCheck, ProfileSummary, check_profile,
                          default_mode, load_profile, preview, summarise)
 from ...profiles.profile import WAVEFORMS_DIR
@@ -275,7 +275,7 @@ class ProfilePanel(QWidget):
         u = s.units
         self.description.setText(p.description or "(no description)")
         self.description.setToolTip(p.source)
-        origin = ("offsets from the position held after ARM" if s.origin == "relative"
+        origin = ("offsets from the position held after ARM" if s.origin == ProfileOrigin.RELATIVE
                   else "absolute values")
         self.fields["target"].setText(f"{s.target} in {u}")
         self.fields["target"].setToolTip(origin)
@@ -289,7 +289,7 @@ class ProfilePanel(QWidget):
         lines = []
         if check.ok:
             lines.append("<span style='color:#2e7d32'><b>✓ the device would accept it</b></span>"
-                         + (f" ({origin})" if s.origin == "relative" else ""))
+                         + (f" ({origin})" if s.origin == ProfileOrigin.RELATIVE else ""))
         lines += [f"<span style='color:#c62828'>✗ {_html(t)}</span>" for t in check.problems]
         lines += [f"<span style='color:#b26a00'>! {_html(t)}</span>" for t in check.warnings]
         self.checks.setText("<br>".join(lines))
@@ -300,7 +300,7 @@ class ProfilePanel(QWidget):
         self.psd_plot.clear()
         # short: the axis is only as tall as the dock (the title names the profile)
         what = {"REFERENCE": "angle", "RATE_REFERENCE": "rate"}.get(p.target, "current")
-        self.time_plot.setLabel("left", f"Δ {what}" if p.origin == "relative" else what,
+        self.time_plot.setLabel("left", f"Δ {what}" if p.origin == ProfileOrigin.RELATIVE else what,
                                 units=p.units)
         self.time_plot.plot(t, x, pen=PENS["samples"])
         self.time_plot.addItem(self.playhead)
