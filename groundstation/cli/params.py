@@ -103,9 +103,12 @@ def load_dictionary_for(args):
 
 
 def _cmd_upload(args) -> int:
+    """params/upload_path.py does the work, through the Station's verb: the table is the
+    design's over the device's active one, validated again at the upload gate."""
     from ..params.clearance import ValidationRefused
-    from ..params.design_file import load_design, table_values
-    from ..params.loop import report_lines, validate
+    from ..params.design_file import load_design
+    from ..params.loop import report_lines
+    from ..params.upload_path import prepare
 
     try:
         design = load_design(args.file)
@@ -114,19 +117,16 @@ def _cmd_upload(args) -> int:
         return fail(text if text.startswith(str(args.file)) else f"{args.file}: {text}", EXIT_UNREADABLE)
     dictionary = load_dictionary_for(args)
     # refuse before touching the device: the design over the defaults must already pass
-    first = validate(design, table_values(design, dictionary=dictionary), dictionary)
+    first = prepare(design, dictionary).report
     if not first.ok:
         for line in report_lines(design, first):
             print(line)
         return fail(f"{args.file}: refused, nothing was sent")
     try:
         with command_station(args, dictionary, testbed=str(design.testbed.path)) as station:
-            # the very table that is sent - the design over the device's active table -
-            # is validated again inside the upload
-            values = table_values(design, base=station.read_params().values, dictionary=dictionary)
             try:
-                record = station.upload_table(
-                    values, str(args.file), design=design, progress=print_progress,
+                record = station.upload_design(
+                    design, progress=print_progress,
                     on_report=lambda report: print("\n".join(report_lines(design, report))))
             except GroundStationError as exc:
                 if isinstance(exc.__cause__, ValidationRefused):

@@ -27,11 +27,17 @@ Safety lives here, not in the callers:
   closed with everything received so far and the reason it closed.
 
 `device="sim"` starts the simulated testbed: with `fast=True` its clock is driven by the
-session (a 60 s dwell takes about a second), the device in this process
-(`fast_sim="inline"`, where a script can reach it) or in a child process of its own
-(`fast_sim="process"`, faster: it does not share this interpreter with the receiver);
-without, as a real-time child process, exactly as `make run` does.  Any other value is
-a rig's address.
+session (a 60 s dwell takes about a second), the device in this process (where a script
+can reach it); `fast=FastSimOptions(where="process")` runs it in a child process of its
+own instead (faster: it does not share this interpreter with the receiver), and the
+same options tune the stepped clock (station/options.py).  Without `fast`, the simulator
+is a real-time child process, exactly as `make run` does.  Any other value is a rig's
+address.  `publishing=ConsolePublishing(endpoint)` publishes the link for read-only
+consoles.
+
+The parameter table goes through params/upload_path.py (design -> table -> gate ->
+upload -> verify), the function generator through a GeneratorDesk
+(station/generator_desk.py); the verbs here hand the work to them.
 """
 
 from __future__ import annotations
@@ -42,16 +48,17 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
-from .clock import FastPacing, ScriptAborted, SteppedClock, WallClock
+from .clock import ScriptAborted, SteppedClock, WallClock
 from ..core.contracts import BaseMotionInstrument
 from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import GroundStationError
-from ..core.kinds import SIMULATED_DEVICE, BetweenSteps, FastSim
+from ..core.kinds import SIMULATED_DEVICE, BetweenSteps
 from ..link.client import DeviceClient
 from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
-from .generator_verbs import GeneratorVerbs
+from .generator_desk import GeneratorDesk
+from .options import ConsolePublishing, FastSimOptions
 from .recording import RecordingSlot, device_record
 from .rig import (LocalSimulator, named_generator, open_link, open_testbed_generator,
                   start_simulator, wants_simulated_generator)
@@ -71,35 +78,35 @@ class ScriptError(GroundStationError):
     """A step of a script or campaign could not be done (the message says which and why)."""
 
 
-class Station(GeneratorVerbs):
+class Station:
     """One session with a testbed (or its simulation); see the module docstring."""
 
     __test__ = False        # `Testbed` is this class: a name pytest must not collect
 
-    def __init__(self, device: str = "sim", *, testbed: str | Path | None = None, fast: bool = False,
+    def __init__(self, device: str = "sim", *, testbed: str | Path | None = None,
+                 fast: bool | FastSimOptions = False,
                  generator: str | None = "auto", log_folder: str | Path = "logs", seed: int = 0,
                  history: str | Path | ParameterHistory | MemoryHistory | None = None,
                  take_over: bool = False, speed: float = 1.0,
                  dictionary: Dictionary | None = None,
                  operator: Callable[[str], bool] | None = None,
                  echo: Callable[[str], None] | None = None,
-                 publish: str | None = None, curve_keys: str | None = None,
-                 pacing: FastPacing | None = None, between_steps: str = "held",
-                 fast_sim: FastSim | str = FastSim.INLINE):
-        try:
-            fast_sim = FastSim(fast_sim)
-        except ValueError:
-            raise ValueError(f"fast_sim must be one of {', '.join(FastSim)}, not {fast_sim!r}") from None
+                 publishing: ConsolePublishing | None = None):
+        """`device`: "sim" (the simulated testbed) or a rig's address.  `fast`: True runs
+        the simulated testbed on the script's clock with the default FastSimOptions; a
+        FastSimOptions says how.  `publishing`: publish the link for read-only consoles."""
+        if not isinstance(fast, (bool, FastSimOptions)):
+            raise TypeError(f"fast must be True, False or a FastSimOptions, not {fast!r}")
+        if publishing is not None and not isinstance(publishing, ConsolePublishing):
+            raise TypeError(f"publishing must be a ConsolePublishing, not {publishing!r}")
         self.device_spec = device
-        #: fast only: where the simulated device runs
-        self.fast_sim = fast_sim
-        #: fast only: how the stepped clock paces the device (clock.py)
-        self.pacing, self.between_steps = pacing, between_steps
-        #: publish the link for read-only consoles on this endpoint (fanout/, docs/consoles.md)
-        self.publish, self.curve_keys = publish, curve_keys
+        self.fast = fast is not False
+        #: fast only: where the simulated device runs and how its clock is paced
+        self.fast_sim = fast if isinstance(fast, FastSimOptions) else FastSimOptions()
+        #: where the link is published for read-only consoles (fanout/, docs/consoles.md)
+        self.publishing = publishing
         self.publisher = None
         self.testbed_path = Path(testbed) if testbed else None
-        self.fast = fast
         self.generator_spec = generator
         self.log_folder = Path(log_folder)
         self.seed = seed
@@ -120,6 +127,9 @@ class Station(GeneratorVerbs):
         self.clock: WallClock | SteppedClock | None = None
         self.generator: BaseMotionInstrument | None = None
         self.recording = RecordingSlot(self.echo)
+        #: the function generator's verbs (the instrument itself is `self.generator`)
+        self.generator_desk = GeneratorDesk(lambda: self.generator, self.testbed, self.recording,
+                                            self.echo)
         self.last_upload = None
         #: the simulated testbed this session started (station/rig.py), if any
         self._local: LocalSimulator | None = None
@@ -224,7 +234,7 @@ class Station(GeneratorVerbs):
         resource = named_generator(self.generator_spec)
         if self.device_spec == SIMULATED_DEVICE:
             self._local = start_simulator(
-                self.testbed.path, dictionary=self.d, fast=self.fast, fast_sim=self.fast_sim,
+                self.testbed.path, dictionary=self.d, fast=self.fast, fast_sim=self.fast_sim.where,
                 seed=self.seed, speed=self.speed,
                 generator=wants_simulated_generator(self.generator_spec, inertial=self.testbed.inertial))
             address, resource = self._local.address, self._local.fg_resource
@@ -236,17 +246,17 @@ class Station(GeneratorVerbs):
         # held between steps, the fast device's time passes only when the stepped clock
         # runs it, and the clock counts the host as heard after every run (device-time
         # heartbeats): a wall-time heartbeat would only land at random ticks
-        held = stepped is not None and self.between_steps == BetweenSteps.HELD
+        held = stepped is not None and self.fast_sim.between_steps == BetweenSteps.HELD
         self.client = open_link(self.d, address, local=self._local, heartbeat=not held)
         self.client.subscribe(self.state)
-        if self.publish:               # before CONNECT: viewers see the session begin
+        if self.publishing is not None:    # before CONNECT: viewers see the session begin
             from ..fanout.publisher import Publisher
-            self.publisher = Publisher(self.publish, curve_keys=self.curve_keys)
+            self.publisher = Publisher(self.publishing.endpoint, curve_keys=self.publishing.curve_keys)
             self.publisher.attach(self.client, address)
             self.echo(f"publishing on {self.publisher.endpoint}")
         self.client.connect(take_over=self.take_over)
-        self.clock = (SteppedClock(stepped, self.client, self.abort_event, pacing=self.pacing,
-                                   between_steps=self.between_steps,
+        self.clock = (SteppedClock(stepped, self.client, self.abort_event, pacing=self.fast_sim.pacing,
+                                   between_steps=self.fast_sim.between_steps,
                                    recorder_backlog=self.recording.backlog)
                       if stepped is not None else WallClock(self.client, self.abort_event))
         if resource:
@@ -343,21 +353,22 @@ class Station(GeneratorVerbs):
         """The device's active table (ActiveTable: bytes, CRC, values)."""
         return self.parameter_loader().read_active(progress)
 
-    def upload_design(self, path: str | Path, accept_risk: str | None = None,
-                      progress: Callable[[str, float], None] | None = None):
+    def upload_design(self, path, accept_risk: str | None = None,
+                      progress: Callable[[str, float], None] | None = None, *,
+                      on_report: Callable[[Any], None] | None = None):
         """Validate a controller design against this testbed's model and upload it,
-        verified.  The table is the design's over the device's active one, and that very
-        table is validated.  A design the validation refuses is not sent, unless
-        `accept_risk` gives the reason an engineer accepts it (recorded in the history and
-        the log); the device still applies its own checks."""
-        from ..params.design_file import load_design, table_values
+        verified.  `path` is a design file (or a ControllerDesign already loaded).  The
+        table is the design's over the device's active one, and that very table is
+        validated.  A design the validation refuses is not sent, unless `accept_risk`
+        gives the reason an engineer accepts it (recorded in the history and the log);
+        the device still applies its own checks.  `on_report` receives the validation's
+        report before anything is sent.  Returns the UploadRecord."""
+        from ..params.upload_path import source_of, upload_design
 
         self._check_running()
-        design = load_design(path)
-        active = self.read_params()
-        values = table_values(design, base=active.values, dictionary=self.d)
-        return self.upload_table(values, str(path), design=design, accept_risk=accept_risk,
-                                 progress=progress)
+        return self._uploaded(source_of(path), lambda loader: upload_design(
+            loader, path, accept_risk=accept_risk, progress=progress, on_report=on_report,
+            warn=self.echo))
 
     def upload_table(self, values: Mapping[str, Any], source: str, *, design=None,
                      accept_risk: str | None = None,
@@ -367,31 +378,26 @@ class Station(GeneratorVerbs):
         without one the closed loop cannot be checked, so it is sent only with
         `accept_risk` (the override, recorded).  `on_report` receives the validation's
         report (passed or refused) before anything is sent.  Returns the UploadRecord."""
-        from ..params.clearance import ValidationRefused, clear_design, override_table
+        from ..params.upload_path import upload_table
 
         self._check_running()
+        return self._uploaded(source, lambda loader: upload_table(
+            loader, values, source, design=design, accept_risk=accept_risk, progress=progress,
+            on_report=on_report, warn=self.echo))
+
+    def _uploaded(self, source: str, upload):
+        """Run one upload of params/upload_path.py on this session's loader: a refusal
+        by the gate becomes the ScriptError a script sees; a verified upload is said and
+        kept as `last_upload`."""
+        from ..params.clearance import ValidationRefused
+
         try:
-            if design is not None:
-                clearance, report = clear_design(design, values, self.d, accept_risk)
-                if on_report is not None:
-                    on_report(report)
-            else:
-                clearance = override_table(values, self.d, accept_risk or "")
+            outcome = upload(self.parameter_loader())
         except ValidationRefused as exc:
-            if on_report is not None and exc.report is not None:
-                on_report(exc.report)
             raise ScriptError(f"{source}: {exc}") from exc
-        if clearance.risk == "marginal":
-            self.echo(f"WARNING: uploading {source} with its margins accepted: {clearance.text()}")
-            source += f" (margins accepted: {clearance.override_reason})"
-        elif clearance.overridden:
-            self.echo(f"WARNING: uploading {source} although it is not validated "
-                      f"({'; '.join(clearance.problems)}); reason given: {clearance.override_reason}")
-            source += f" (not validated; accepted: {clearance.override_reason})"
-        self.last_upload = self.parameter_loader().upload(values, source=source, progress=progress,
-                                                          clearance=clearance)
-        self.echo(f"parameter table {self.last_upload.crc:08x} verified ({source})")
-        return self.last_upload
+        self.last_upload = outcome.record
+        self.echo(f"parameter table {outcome.record.crc:08x} verified ({outcome.source})")
+        return outcome.record
 
     def rollback_params(self, progress: Callable[[str, float], None] | None = None):
         """Re-activate the table that was active before the upload that made the active one."""
@@ -519,12 +525,25 @@ class Station(GeneratorVerbs):
         self.recording.mark("script", text)
 
     # ------------------------------------------------------------------ generator
-    # (its verbs: generator_verbs.GeneratorVerbs)
-    def _need_generator(self, what: str):
-        if self.generator is None:
-            raise ScriptError(f"{what}: no function generator in this session "
-                              f"(give generator='sim' or a VISA resource)")
-        return self.generator
+    # the work is the GeneratorDesk's; these are the script verbs (campaign actions too)
+    def generator_set(self, channel: int = 1, *, waveform: str = "SINE", frequency_hz: float | None = None,
+                      amplitude_vpp: float | None = None, offset_v: float = 0.0,
+                      phase_deg: float = 0.0, output: bool = True) -> None:
+        """Configure one channel of the generator and switch its output on (or off)."""
+        self.generator_desk.set(channel, waveform=waveform, frequency_hz=frequency_hz,
+                                amplitude_vpp=amplitude_vpp, offset_v=offset_v,
+                                phase_deg=phase_deg, output=output)
+
+    def generator_off(self) -> None:
+        """Every generator output off (nothing to do without a generator)."""
+        self.generator_desk.off()
+
+    def play_base_motion(self, psd_file: str | Path, *, duration_s: float = 60.0, seed: int = 0,
+                         rms_rad: float | None = None, channel: int = 1):
+        """Synthesise a base-motion profile from a PSD table, play it on the generator
+        and return the profile (GeneratorDesk.play_base_motion)."""
+        return self.generator_desk.play_base_motion(psd_file, duration_s=duration_s, seed=seed,
+                                                    rms_rad=rms_rad, channel=channel)
 
     # ------------------------------------------------------------------ helpers
     def _journal(self, kind: str, record: dict, blob: bytes = b"") -> None:
@@ -539,6 +558,11 @@ class Station(GeneratorVerbs):
         if self.state.fault:
             raise ScriptError("the device reports a fault (see its EVENTs); it has disarmed - "
                               "send DISARM to acknowledge it, then try again")
+
+    def _close_generator(self) -> None:
+        gen, self.generator = self.generator, None
+        if gen is not None and self._owns_generator:
+            gen.close()
 
     def _close_clock(self) -> None:
         if self.clock is not None:
