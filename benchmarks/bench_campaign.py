@@ -2,13 +2,13 @@
 
 Side by side, in one run, repeated (--rounds, interleaved; medians):
 
-  ours       Testbed(fast=True, fast_sim="process"), what `campaign run --fast` does:
+  ours       Testbed(fast=FastSimOptions(where="process")), what `campaign run --fast` does:
              relative Design #2 uploaded, a 60 s band-limited current profile played
              open loop and a 60 s dwell, both recorded - device seconds per wall second;
              the simulator in a child process of its own, pipelined (clock.FastPacing():
              several 0.75 s chunks in flight, many frames per datagram, device held
              between steps)
-  inline     the same with the simulator in this process (fast_sim="inline"), sharing
+  inline     the same with the simulator in this process (FastSimOptions(where="inline")), sharing
              the interpreter with the telemetry receiver
   one chunk  the same with the pacing before issue 19: one chunk in flight, one frame per
              datagram, the device running in real time between steps
@@ -42,6 +42,7 @@ from common import machine, save
 
 from groundstation import Testbed
 from groundstation.station.clock import ONE_CHUNK_IN_FLIGHT, FastPacing
+from groundstation.station.options import FastSimOptions
 from groundstation.core.dictionary import load_dictionary
 from groundstation.sim.device import SimulatedDevice
 from groundstation.sim.firmware import Firmware
@@ -83,7 +84,7 @@ class _Timers:
 
     def __init__(self, device, tb) -> None:
         self.tb = tb
-        #: the simulator's child process (fast_sim="process"), else None
+        #: the simulator's child process (where="process"), else None
         self.child = getattr(device, "proc", None)
         self.cpu0 = self._cpus()
         self.t: Counter = Counter()
@@ -139,9 +140,9 @@ class _Timers:
 
 def campaign(tmp: str, pacing: FastPacing, between_steps: str, fast_sim: str,
              profile: bool) -> dict:
-    with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=True,
-                 log_folder=tmp, history=Path(tmp) / "history", pacing=pacing,
-                 between_steps=between_steps, fast_sim=fast_sim) as tb:
+    fast = FastSimOptions(where=fast_sim, pacing=pacing, between_steps=between_steps)
+    with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=fast,
+                 log_folder=tmp, history=Path(tmp) / "history") as tb:
         tb.upload_design(ROOT / "profiles" / "controllers" / "relative_design2.toml")
         tb.start_recording("bench")
         timers = _Timers(tb.simulator, tb) if profile else None

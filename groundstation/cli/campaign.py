@@ -206,6 +206,7 @@ def _cmd_run(args) -> int:
     from ..campaign import CampaignReport, CampaignRunner, load_campaign
     from ..campaign.run_setup import resolve_setup
     from ..core.dictionary import load_dictionary
+    from ..station.options import ConsolePublishing, FastSimOptions
     from ..station.station import Station as Testbed
 
     given = {k: getattr(args, k) for k in ("device", "fast", "fast_sim", "seed", "testbed", "log_folder")
@@ -239,10 +240,12 @@ def _cmd_run(args) -> int:
     report = None
     interrupted = False
     try:
-        with Testbed(setup["device"], testbed=c.testbed, fast=setup["fast"], generator=generator,
+        fast = FastSimOptions(where=setup["fast_sim"]) if setup["fast"] else False
+        publishing = (ConsolePublishing(args.publish, curve_keys=args.curve_keys)
+                      if args.publish else None)
+        with Testbed(setup["device"], testbed=c.testbed, fast=fast, generator=generator,
                      log_folder=folder, seed=setup["seed"], take_over=args.take_over, operator=operator,
-                     publish=args.publish, curve_keys=args.curve_keys, fast_sim=setup["fast_sim"],
-                     echo=lambda text: print(f"    {text}", flush=True)) as tb:
+                     publishing=publishing, echo=lambda text: print(f"    {text}", flush=True)) as tb:
             runner = CampaignRunner(c, tb, max_step_seconds=args.max_step_seconds,
                                     progress=_Progress(len(c.steps)))
             report = runner.run(resume)

@@ -20,6 +20,7 @@ import pytest
 
 from groundstation import Testbed
 from groundstation.station.clock import ONE_CHUNK_IN_FLIGHT, FastPacing, SteppedClock
+from groundstation.station.options import FastSimOptions
 from groundstation.link import open_client
 from groundstation.logs.reader import LogReader
 from groundstation.plant.testbed import TESTBEDS_DIR
@@ -36,8 +37,8 @@ PIPELINED = FastPacing(in_flight=6, datagram_bytes=32768)
 def _session(folder: Path, pacing: FastPacing, fast_sim: str = "inline") -> tuple[Path, dict]:
     """Closed loop, a step, a profile played, a mark, then open loop driven into a
     fault that ends a dwell early - all recorded."""
-    with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml", fast=True,
-                 log_folder=folder, pacing=pacing, fast_sim=fast_sim) as tb:
+    with Testbed("sim", testbed=TESTBEDS_DIR / "relative_2dof.toml",
+                 fast=FastSimOptions(where=fast_sim, pacing=pacing), log_folder=folder) as tb:
         tb.upload_design(DESIGN)
         tb.start_recording("speed")
         tb.set_mode("RELATIVE")

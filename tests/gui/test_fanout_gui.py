@@ -10,6 +10,7 @@ import pytest
 from groundstation.fanout.endpoints import read_only_message
 from groundstation.logs.check import check_log
 from groundstation import Testbed
+from groundstation.station.options import ConsolePublishing
 
 pytest.importorskip("pytestqt")
 
@@ -19,7 +20,7 @@ def commander(tmp_path):
     """A script holding the session on a fast simulated testbed, publishing; it dwells
     (the device runs) until the test lets it go."""
     tb = Testbed("sim", fast=True, log_folder=tmp_path / "commander", generator=None,
-                 publish="tcp://127.0.0.1:*")
+                 publishing=ConsolePublishing("tcp://127.0.0.1:*"))
     tb.open()
     release, failures = threading.Event(), []
 

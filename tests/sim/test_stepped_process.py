@@ -13,6 +13,7 @@ import sys
 import pytest
 
 from groundstation import Testbed
+from groundstation.station.options import FastSimOptions
 from groundstation.core.errors import LinkError, LinkLostError
 from groundstation.plant.testbed import TESTBEDS_DIR
 from groundstation.sim.stepped_process import SteppedSimulatorProcess
@@ -101,15 +102,15 @@ def test_the_child_ends_when_the_ground_station_goes(tmp_path):
 
 
 def test_where_the_fast_simulator_runs_is_checked():
-    with pytest.raises(ValueError, match="fast_sim must be one of inline, process"):
-        Testbed("sim", testbed=TESTBED, fast=True, fast_sim="thread")
+    with pytest.raises(ValueError, match="where must be one of inline, process"):
+        Testbed("sim", testbed=TESTBED, fast=FastSimOptions(where="thread"))
 
 
 def test_a_session_with_the_process_simulator_and_its_generator(tmp_path):
     """An inertial testbed gets the simulated generator in the child too: the session
     talks SCPI to it and the base stage moves the telemetry's base encoder."""
-    with Testbed("sim", testbed=TESTBEDS_DIR / "inertial_2dof.toml", fast=True,
-                 fast_sim="process", log_folder=tmp_path) as tb:
+    with Testbed("sim", testbed=TESTBEDS_DIR / "inertial_2dof.toml", fast=FastSimOptions(where="process"),
+                 log_folder=tmp_path) as tb:
         assert tb.generator is not None and tb.simulator.fg_resource
         tb.dwell(0.5)
         assert tb.state.tick >= 600
@@ -120,7 +121,7 @@ def test_the_log_names_the_simulators_seed(tmp_path):
     its clock."""
     from groundstation.logs.reader import LogReader
 
-    with Testbed("sim", testbed=TESTBED, fast=True, fast_sim="process", seed=7,
+    with Testbed("sim", testbed=TESTBED, fast=FastSimOptions(where="process"), seed=7,
                  log_folder=tmp_path) as tb:
         tb.start_recording("seeded")
         tb.dwell(0.1)
