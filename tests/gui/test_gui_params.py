@@ -111,3 +111,36 @@ def test_a_marginal_design_is_sent_only_with_its_margins_accepted(qtbot, window,
     assert panel.upload()
     qtbot.waitUntil(lambda: "verified" in panel.result.text(), timeout=20000)
     assert "stable but marginal, margins accepted: slow loop for a bearing run-in" in panel.result.text()
+
+
+def test_the_numerics_run_off_the_gui_thread_while_it_serves_events(qtbot, window, monkeypatch):
+    """Validating (and the Bode data) runs on the panel's pool thread; the GUI thread
+    meanwhile serves its events: a timer of the GUI thread releases the validation."""
+    import threading
+
+    from PySide6.QtCore import QTimer
+
+    import groundstation.gui.panels.params as panel_module
+
+    panel = window.parameters
+    served = threading.Event()
+    threads: list[bool] = []
+    real_validate = panel_module.validate
+
+    def validate(*args, **kwargs):
+        threads.append(threading.current_thread() is threading.main_thread())
+        # held until the GUI thread has served a timer: on the GUI thread this would hang
+        assert served.wait(60), "the GUI thread served no event while validating"
+        return real_validate(*args, **kwargs)
+
+    monkeypatch.setattr(panel_module, "validate", validate)
+    QTimer.singleShot(0, served.set)
+    assert panel.load_design(CONTROLLERS / "relative_design2.toml")
+    assert threads == [False]
+    assert panel.report is not None and panel.report.ok and panel.mag_plot.listDataItems()
+    assert panel.upload_button.isEnabled() and panel.load_button.isEnabled()   # given back
+    # Validate again: the same, and a current report spares Upload a second validation
+    served.clear()
+    QTimer.singleShot(0, served.set)
+    assert panel.run_validation() is panel.report and threads == [False, False]
+    assert panel.set_value("saturation_fine", "12.5") is None and panel.report is None

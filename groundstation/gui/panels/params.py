@@ -4,7 +4,11 @@ Three columns of values side by side (design or edited / last uploaded from here
 the device reports), edit in place with range checks, validation with the closed loop of
 the design's testbed, a Bode plot of the loop gain with its margins, upload (confirmed),
 read back and roll back.  The widget does no link I/O: the Session runs uploads on worker
-threads (the Station's verbs) and answers with its sig_params_* signals."""
+threads (the Station's verbs, which take the table through params/upload_path.py and its
+upload gate) and answers with its sig_params_* signals.  Nor does it run the numerics on
+the GUI thread: building a design's table, validating it and its Bode data run on the
+panel's own pool thread (`_off_gui_thread`) while the GUI thread goes on serving events,
+as it does while one of the panel's dialogs is open."""
 
 from __future__ import annotations
 
@@ -15,13 +19,14 @@ from typing import Any
 
 import numpy as np
 import pyqtgraph as pg
-from PySide6.QtCore import Qt
+from PySide6.QtCore import QEventLoop, QObject, Qt, QThreadPool, Signal
 from PySide6.QtWidgets import (QCheckBox, QFileDialog, QHBoxLayout, QInputDialog, QLabel,
                                QMessageBox, QProgressBar, QPushButton, QSplitter, QTextBrowser,
                                QTreeWidget, QTreeWidgetItem, QVBoxLayout, QWidget)
 
 from ...core.dictionary import Dictionary, ParameterDef
 from ...core.errors import GroundStationError
+from ...core.kinds import LinkState
 from ...params import table as ptable
 from ...params.compare import three_way, wire_value
 from ...params.design_file import ControllerDesign, load_design, table_values
@@ -56,6 +61,10 @@ class ParameterPanel(QWidget):
         self.override_reason: str | None = None
         self._filling = False
         self.workbench = None                                # opened on demand
+        #: the numerics' thread: one job at a time, apart from the pool other jobs share
+        self._pool = QThreadPool(self)
+        self._pool.setMaxThreadCount(1)
+        self._busy = False                                   # a check runs on the pool
         self._build()
         session.sig_params_active.connect(self._on_active)
         session.sig_params_uploaded.connect(self._on_uploaded)
@@ -153,10 +162,15 @@ class ParameterPanel(QWidget):
             self.load_design(path)
 
     def load_design(self, path: str | Path) -> bool:
-        """Read a design and build its table over the device's (defaults if none read)."""
+        """Read a design, build its table over the device's (defaults if none read) and
+        validate it (the numerics off the GUI thread; this returns when they are done)."""
+        if self._busy:
+            self._say("a validation is still running: try again when it has finished", bad=True)
+            return False
+        base = self.device
         try:
-            design = load_design(path)
-            values = table_values(design, base=self.device, dictionary=self.d)
+            design, values, report, curve, error = self._off_gui_thread(
+                lambda: _prepared(path, self.d, base))
         except GroundStationError as exc:
             self._say(str(exc), bad=True)
             return False
@@ -165,13 +179,16 @@ class ParameterPanel(QWidget):
         self.design_label.setText(f"<b>{design.name}</b> ({design.mode}) for {design.testbed.name} "
                                   f"- {Path(path).name}" + (f"<br>{'; '.join(design.notes)}"
                                                             if design.notes else ""))
-        self._say("design loaded: Validate to check it against the testbed's closed loop")
         self._fill()
-        self.run_validation()
+        if error is not None:
+            self._say(f"validation failed: {error}", bad=True)
+        else:
+            self._show_report(report, curve)
         return True
 
     def run_validation(self) -> ValidationReport | None:
-        """Check the table Upload would send; with a design, the closed loop too."""
+        """Check the table Upload would send; with a design, the closed loop too (off the
+        GUI thread; this returns when it is done)."""
         if self.values is None:
             self._say("nothing to validate: load a design or read the device's table", bad=True)
             return None
@@ -180,11 +197,21 @@ class ParameterPanel(QWidget):
             self._say("table OK (no design loaded: the closed loop is not checked)" if not problems
                       else "refused: " + "; ".join(problems), bad=bool(problems))
             return None
+        if self._busy:
+            self._say("a validation is still running: try again when it has finished", bad=True)
+            return None
+        design, values = self.design, self.values
         try:
-            report = validate(self.design, self.values, self.d)
+            report, curve = self._off_gui_thread(lambda: _checked(design, dict(values), self.d))
         except GroundStationError as exc:
             self._say(f"validation failed: {exc}", bad=True)
             return None
+        # an edit in the tree meanwhile makes a new table (set_value): this report is not its
+        if design is not self.design or values is not self.values:
+            return None
+        return self._show_report(report, curve)
+
+    def _show_report(self, report: ValidationReport, curve) -> ValidationReport:
         self.report = report
         m = report.margins
         if report.ok:
@@ -197,17 +224,49 @@ class ParameterPanel(QWidget):
         self._say(head + (f" - {m.text()}" if m is not None else ""), bad=not report.ok)
         self.report_view.setHtml(_report_html(self.design, report))
         self.report_view.setVisible(True)
-        self._plot_bode()
+        self._plot_bode(curve)
         return report
 
-    def _plot_bode(self) -> None:
+    def _off_gui_thread(self, work):
+        """Run `work()` on the panel's pool thread and return what it returns (or raise
+        what it raised).  Meanwhile the GUI thread serves its events in a local loop - the
+        charts and the link go on, as under a dialog - with the panel's buttons disabled
+        so that nothing of the panel starts twice."""
+        done = _Relay()
+        loop = QEventLoop()
+        done.finished.connect(loop.quit)     # queued: emitted on the pool thread
+        outcome: dict[str, Any] = {}
+
+        def run() -> None:
+            try:
+                outcome["result"] = work()
+            except BaseException as exc:     # handed to the GUI thread, raised there
+                outcome["error"] = exc
+            finally:
+                done.finished.emit()
+
+        buttons = (self.load_button, self.validate_button, self.upload_button, self.read_button,
+                   self.rollback_button, self.workbench_button)
+        enabled = [b.isEnabled() for b in buttons]
+        for b in buttons:
+            b.setEnabled(False)
+        self._busy = True
+        try:
+            self._pool.start(run)
+            loop.exec()
+        finally:
+            self._busy = False
+            for b, on in zip(buttons, enabled):
+                b.setEnabled(on)
+        if "error" in outcome:
+            raise outcome["error"]
+        return outcome["result"]
+
+    def _plot_bode(self, b) -> None:
+        """Draw the loop gain's Bode data (computed off the GUI thread; None: none)."""
         self.mag_plot.clear()
         self.phase_plot.clear()
-        if self.design is None or self.values is None:
-            return
-        try:
-            b = bode(self.design, self.values)
-        except GroundStationError:
+        if b is None:
             return
         finite = np.isfinite(b.magnitude_db)
         f = np.log10(b.freqs_hz[finite])
@@ -250,7 +309,9 @@ class ParameterPanel(QWidget):
         problems = ptable.problems(self.d, self.values)
         reason = None
         if self.design is not None:
-            report = self.run_validation()
+            # the report of this very table when there is one (it is dropped whenever the
+            # table changes), else a fresh validation; the upload gate validates it again
+            report = self.report or self.run_validation()
             if report is None or report.problems:
                 return False
             if report.marginal:
@@ -337,7 +398,7 @@ class ParameterPanel(QWidget):
         self._fill()
 
     def _on_link(self, state: str, _message: str) -> None:
-        if state == "up":
+        if state == LinkState.UP:
             self.session.params_read()
 
     # ------------------------------------------------------------------ the tree
@@ -401,7 +462,6 @@ class ParameterPanel(QWidget):
             self._say(error, bad=True)
         else:
             self.source = "edited" if not self.source.startswith("edited") else self.source
-            self.report = None
             self._say(f"{name} edited: Validate, then Upload")
         self._fill()
 
@@ -435,11 +495,42 @@ class ParameterPanel(QWidget):
         if problems:
             return "; ".join(problems)
         self.values = candidate
+        self.report = None                   # it judged the table before this change
         return None
 
     def _say(self, text: str, bad: bool = False) -> None:
         self.result.setText(text)
         self.result.setStyleSheet(BAD_STYLE if bad else "")
+
+
+class _Relay(QObject):
+    """Tells the GUI thread that a job on the panel's pool has ended."""
+
+    finished = Signal()
+
+
+def _prepared(path, dictionary: Dictionary, base):
+    """Pool thread: a design file read and its table built over `base`, then its validation
+    and Bode data - or the error that stopped the validation, for a design still loaded."""
+    design = load_design(path)
+    values = table_values(design, base=base, dictionary=dictionary)
+    try:
+        report, curve = _checked(design, values, dictionary)
+    except GroundStationError as exc:
+        return design, values, None, None, exc
+    return design, values, report, curve, None
+
+
+def _checked(design: ControllerDesign, values: dict, dictionary: Dictionary):
+    """Pool thread: a table's validation against its design, and its Bode data."""
+    return validate(design, values, dictionary), _bode_or_none(design, values)
+
+
+def _bode_or_none(design: ControllerDesign, values: dict):
+    try:
+        return bode(design, values)
+    except GroundStationError:               # no curve to draw; the report says why
+        return None
 
 
 def _range_text(p: ParameterDef) -> str:
