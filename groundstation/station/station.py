@@ -52,7 +52,7 @@ from .clock import ScriptAborted, SteppedClock, WallClock
 from ..core.contracts import BaseMotionInstrument
 from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import GroundStationError
-from ..core.kinds import SIMULATED_DEVICE, BetweenSteps
+from ..core.kinds import SIMULATED_DEVICE, BetweenSteps, LinkState
 from ..link.client import DeviceClient
 from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
@@ -162,7 +162,7 @@ class Station:
         make_safe()/abort() act as always (ABORT on the shared link, generator outputs
         off, this session's recording closed); close() closes only what the session
         opened itself - the client stays open, with this session's subscriptions removed."""
-        if client is None or client.link_state != "up":
+        if client is None or client.link_state != LinkState.UP:
             raise ScriptError("attach: the link is not up - connect to the device first")
         st = cls("attached", testbed=testbed, generator=None, log_folder=log_folder,
                  history=history, dictionary=client.dictionary, operator=operator, echo=echo)
@@ -277,7 +277,7 @@ class Station:
             self._make_safe(reason)
 
     def _make_safe(self, reason: str) -> None:
-        if self.client is not None and self.client.link_state == "up":
+        if self.client is not None and self.client.link_state == LinkState.UP:
             try:
                 self.client.command("ABORT")
             except GroundStationError as exc:
@@ -504,7 +504,7 @@ class Station:
                                     writer_niceness=FAST_WRITER_NICENESS if fast else 0)
         if self.device_spec != "attached":     # (attached: the window's recording says it)
             self.recording.journal("testbed", device_record(
-                self.device_spec == "sim", address=self.address, seed=self.seed, fast=fast,
+                self.device_spec == SIMULATED_DEVICE, address=self.address, seed=self.seed, fast=fast,
                 speed=self.speed))
         if isinstance(self.clock, SteppedClock):
             self.clock.tick_over()          # held device time: the log opens with telemetry
