@@ -252,3 +252,95 @@ def test_no_function_is_over_80_lines():
                 if lines > MAX_FUNCTION_LINES:
                     long.append(f"{name}:{node.lineno}: {node.name} ({lines} lines)")
     assert not long, "\n".join(long)
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _absolute(path: Path, node: ast.ImportFrom) -> str:
+    """The module an ImportFrom names, made absolute."""
+    if not node.level:
+        return node.module or ""
+    package = _module_name(path).split(".")
+    if path.name != "__init__.py":
+        package = package[:-1]
+    base = package[:len(package) - (node.level - 1)]
+    return ".".join(base + (node.module.split(".") if node.module else []))
+
+
+def test_no_class_is_assembled_from_mixins():
+    """A class that grew too big is split by extracting a collaborator object it owns, not
+    by mixing in classes that use attributes only the final class provides: at most one
+    base class of the project's own, and none called a mixin.  An exception may have two
+    (ReplayDamagedError is a LogDamagedError and a ReplayError: `except` finds it as either)."""
+    offenders = []
+    own = {node.name for path in PKG.rglob("*.py") for node in ast.walk(ast.parse(path.read_text()))
+           if isinstance(node, ast.ClassDef)}
+    for path in sorted(PKG.rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ClassDef):
+                continue
+            bases = [ast.unparse(b).split(".")[-1] for b in node.bases]
+            ours = [b for b in bases if b in own]
+            if all(b.endswith(("Error", "Exception")) for b in bases):
+                continue
+            if len(ours) > 1 or any(b.endswith("Mixin") for b in bases) or node.name.endswith("Mixin"):
+                offenders.append(f"{path.relative_to(PKG)}:{node.lineno} {node.name}({', '.join(bases)})")
+    assert not offenders, offenders
+
+
+def test_no_module_re_exports_what_another_defines():
+    """A name is imported from the module that defines it (a package's __init__ may name
+    its public API): a module that passes on names it imported is a shim left by a split."""
+    sources = sorted(PKG.rglob("*.py"))
+    imported_into: dict[str, set[str]] = {}
+    for path in sources:
+        if path.name == "__init__.py":
+            continue
+        names = set()
+        for node in ast.parse(path.read_text()).body:
+            if isinstance(node, ast.ImportFrom) and _absolute(path, node).startswith("groundstation"):
+                names |= {a.asname or a.name for a in node.names}
+        imported_into[_module_name(path)] = names
+    offenders = []
+    for path in sources + sorted((PKG.parent / "tests").rglob("*.py")):
+        for node in ast.walk(ast.parse(path.read_text())):
+            if isinstance(node, ast.ImportFrom) and path.is_relative_to(PKG) or (
+                    isinstance(node, ast.ImportFrom) and (node.module or "").startswith("groundstation")):
+                module = _absolute(path, node) if path.is_relative_to(PKG) else node.module
+                passed_on = [a.name for a in node.names if a.name in imported_into.get(module, ())]
+                if passed_on:
+                    offenders.append(f"{path.relative_to(PKG.parent)}:{node.lineno}: {passed_on} "
+                                     f"from {module}, which only imports them")
+    assert not offenders, "\n".join(offenders)
+
+
+#: the closed vocabularies (core/kinds.py) and the expressions that hold one of their words
+VOCABULARY_WORDS = {"up", "lost", "ended", "closed", "connecting", "failed", "inertial",
+                    "relative", "absolute", "inline", "process", "held", "realtime", "manual",
+                    "auto", "none", "sim"}
+VOCABULARY_HOLDERS = ("link_state", "setup", "mode", "origin", "between_steps", "fast_sim",
+                      "pacing", "address", "device_spec", "generator_spec")
+
+
+def test_closed_vocabularies_are_compared_as_enums_not_string_literals():
+    """`client.link_state == LinkState.UP`, not `== "up"`: a misspelt member fails at import,
+    a misspelt string is a comparison that is silently never true."""
+    offenders = []
+    for path in sorted(PKG.rglob("*.py")):
+        if path.name == "kinds.py":
+            continue
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.Compare):
+                continue
+            operands = [node.left, *node.comparators]
+            words = [c.value for o in operands
+                     for c in (o.elts if isinstance(o, (ast.Tuple, ast.List, ast.Set)) else [o])
+                     if isinstance(c, ast.Constant) and c.value in VOCABULARY_WORDS]
+            held = [o for o in operands if any(h in ast.unparse(o) for h in VOCABULARY_HOLDERS)
+                    or ast.unparse(o) in ("state", "s")]
+            if words and held:
+                offenders.append(f"{path.relative_to(PKG)}:{node.lineno}: {ast.unparse(node)}")
+    assert not offenders, "\n".join(offenders)

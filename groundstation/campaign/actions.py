@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable, ClassVar
 
+from ..core.kinds import LinkState
 from ..core.errors import GroundStationError
 from ..instruments import spec4050
 from .checks import StepCheck
@@ -112,7 +113,7 @@ class Connect(Action):
 
     def run(self, r: StepRun) -> None:
         # the Testbed connected when it opened: this step checks the link is still there
-        if r.tb.client is None or r.tb.client.link_state != "up":
+        if r.tb.client is None or r.tb.client.link_state != LinkState.UP:
             raise GroundStationError("the link is not up")
 
 
