@@ -194,7 +194,12 @@ class DemoController(QObject):
         self.charts.set_paused(False)
         self._set("uploading", f"validating and uploading {plan.design.name}…")
         p = self.parameters
-        if not p.load_design(plan.design) or p.report is None or not p.report.ok:
+        loaded = p.load_design(plan.design)
+        if self.state != "uploading":
+            # aborted (Esc) while the design was validated off the GUI thread: the window
+            # kept serving events meanwhile, so nothing more may be started now
+            return self.state
+        if not loaded or p.report is None or not p.report.ok:
             return self._fail(f"{plan.design.name} does not validate: {p.result.text()}")
         self._crc = ptable.table_crc(ptable.pack(self.session.d, p.values))
         self._upload_pending = True

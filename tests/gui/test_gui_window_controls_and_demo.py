@@ -252,6 +252,31 @@ def test_demo_is_offered_only_once_the_telemetry_shows_the_drives_disarmed(qtbot
     qtbot.waitUntil(lambda: window.demo_action.isEnabled(), timeout=5000)
 
 
+def test_demo_escape_while_the_design_is_validated_sends_no_table(qtbot, window):
+    """The design is validated off the GUI thread while the window serves events, so Esc
+    can arrive before the upload is sent: then nothing is sent at all."""
+    connect(qtbot, window)
+    qtbot.waitUntil(lambda: window.demo_action.isEnabled(), timeout=10000)
+    tables: list[str] = []
+    window.session.client.add_command_listener(
+        lambda r: tables.append(r.name) if r.name.startswith("PARAM_") and r.name != "PARAM_READ"
+        else None)
+    sent = sent_commands(window)
+
+    def esc_at_once(state: str, _text: str) -> None:
+        if state == "uploading":                     # the demo has begun: the operator hits Esc
+            window.abort()
+    window.demo.sig_state.connect(esc_at_once)
+    window.demo_action.trigger()
+    window.demo.sig_state.disconnect(esc_at_once)
+    assert window.demo.state == "aborted"
+    qtbot.waitUntil(lambda: "ABORT" in sent, timeout=10000)
+    qtbot.waitUntil(lambda: window.demo_action.isEnabled(), timeout=30000)
+    frames = ring(window).total_frames
+    qtbot.waitUntil(lambda: ring(window).total_frames > frames + 1200, timeout=10000)
+    assert tables == [] and "ARM" not in sent
+
+
 def test_demo_escape_during_the_upload_plays_nothing(qtbot, window):
     connect(qtbot, window)
     qtbot.waitUntil(lambda: window.demo_action.isEnabled(), timeout=10000)
