@@ -112,11 +112,11 @@ class _Writer:
         """Take what arrives until the next flush is due, a stop is asked, or the parent
         is gone."""
         try:
-            msg = self.inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
-            while not self.take(msg):
-                msg = self.inbox.get_nowait()
-        except queue.Empty:
-            pass
+            # the queue running empty ends this turn: the flush is due or nothing more came
+            with contextlib.suppress(queue.Empty):
+                msg = self.inbox.get(timeout=max(0.0, next_flush - time.monotonic()))
+                while not self.take(msg):
+                    msg = self.inbox.get_nowait()
         except (EOFError, OSError):        # the parent went away: finish cleanly
             self.stopping = True
             self.stop_reason = self.stop_reason or "the recording program's queue closed"
