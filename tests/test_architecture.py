@@ -254,6 +254,55 @@ def test_no_function_is_over_80_lines():
     assert not long, "\n".join(long)
 
 
+#: parameter names that hold a device connection or an instrument, and the contracts
+#: (core/contracts.py) their annotation may name
+DEVICE_FACING = {"client": ("DeviceLink", "CommandChannel", "TelemetrySource"),
+                 "fg": ("BaseMotionInstrument",)}
+#: the packages that implement the contracts use their own classes
+CONTRACT_HOMES = ("link/", "instruments/", "sim/", "core/contracts.py")
+
+
+def device_facing_problems(path: Path, name: str) -> list[str]:
+    problems = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            continue
+        a = node.args
+        for arg in a.posonlyargs + a.args + a.kwonlyargs:
+            allowed = DEVICE_FACING.get(arg.arg)
+            if allowed is None:
+                continue
+            text = ast.unparse(arg.annotation) if arg.annotation is not None else ""
+            named = {n.id for n in ast.walk(ast.parse(text.strip("'\""), mode="eval"))
+                     if isinstance(n, ast.Name)} if text else set()
+            if not named & set(allowed):
+                problems.append(f"{name}:{node.lineno}: {node.name}({arg.arg}: {text or '?'}) "
+                                f"- annotate with {' or '.join(allowed)}")
+    return problems
+
+
+def test_device_facing_parameters_are_annotated_with_the_contracts():
+    """What holds a device connection (`client`) or the function generator (`fg`) says
+    which side of the contract it needs, not which class provides it: a replay, a test
+    double or another link then stands in without an adapter."""
+    problems = []
+    for path in sorted(PKG.rglob("*.py")):
+        name = path.relative_to(PKG).as_posix()
+        if not name.startswith(CONTRACT_HOMES):
+            problems += device_facing_problems(path, name)
+    assert not problems, "\n".join(problems)
+
+
+def test_the_contract_rule_catches_a_bare_or_concrete_parameter(tmp_path):
+    sample = tmp_path / "sample.py"
+    sample.write_text("def a(client): pass\n"
+                      "def b(client: DeviceClient): pass\n"
+                      "def c(client: 'DeviceLink | None' = None, fg: BaseMotionInstrument = None): pass\n"
+                      "def d(*, fg): pass\n")
+    problems = device_facing_problems(sample, "sample.py")
+    assert [p.split(":")[1] for p in problems] == ["1", "2", "4"], problems
+
+
 def _module_name(path: Path) -> str:
     parts = list(path.relative_to(PKG.parent).with_suffix("").parts)
     return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
@@ -286,6 +335,8 @@ def test_no_class_is_assembled_from_mixins():
             ours = [b for b in bases if b in own]
             if all(b.endswith(("Error", "Exception")) for b in bases):
                 continue
+            if "Protocol" in bases:
+                continue        # a contract made of contracts: no code of its own to mix
             if len(ours) > 1 or any(b.endswith("Mixin") for b in bases) or node.name.endswith("Mixin"):
                 offenders.append(f"{path.relative_to(PKG)}:{node.lineno} {node.name}({', '.join(bases)})")
     assert not offenders, offenders

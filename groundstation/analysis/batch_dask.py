@@ -50,10 +50,11 @@ def dask_client(scheduler: str = "local", workers: int = 2) -> Iterator[Any]:
             yield client
 
 
-def run_on(client, paths: list[Path], options: BatchOptions = BatchOptions(),
+def run_on(scheduler_client, paths: list[Path], options: BatchOptions = BatchOptions(),
            known: dict[str, dict[str, Any]] | None = None,
            progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
-    """Every log's row, computed by `client`'s workers, in the order of `paths`;
+    """Every log's row, computed by the workers behind `scheduler_client` (a
+    dask.distributed.Client), in the order of `paths`;
     `progress(done, total)` after each log."""
     from dask.distributed import as_completed
 
@@ -62,7 +63,7 @@ def run_on(client, paths: list[Path], options: BatchOptions = BatchOptions(),
     # file names must not be taken for ours
     token = uuid.uuid4().hex[:8]
     # positional iterables are mapped element by element (keywords would be broadcast)
-    futures = client.map(analyze_one, [str(p) for p in paths], [options] * len(paths),
+    futures = scheduler_client.map(analyze_one, [str(p) for p in paths], [options] * len(paths),
                          [known.get(str(p)) for p in paths],
                          key=[f"analyze-log-{token}-{i}-{Path(p).name}" for i, p in enumerate(paths)],
                          pure=False)

@@ -44,6 +44,7 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ..core.contracts import BaseMotionInstrument
 from ..core.errors import GroundStationError
 
 if TYPE_CHECKING:
@@ -90,7 +91,7 @@ def _testbed(args):
     return load_testbed(args.testbed or _default_testbed())
 
 
-def _hold(fg, channel: int, seconds: float | None, marks: list | None = None,
+def _hold(fg: BaseMotionInstrument, channel: int, seconds: float | None, marks: list | None = None,
           clock=None) -> None:
     """Output on, for `seconds` (None: until Ctrl-C or SIGTERM), then off.  With `clock`
     (the newest device time seen), `marks` gets the device times of on and off."""

@@ -7,6 +7,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..core.contracts import CommandChannel, DeviceLink
 from ..core.kinds import LinkState
 from ..core.errors import GroundStationError
 
@@ -60,7 +61,8 @@ def _cmd_record(args) -> int:
         return code
 
 
-def _record_loop(args, rec, keeper, client, stop, failures, format_snapshot) -> tuple[int, str]:
+def _record_loop(args, rec, keeper, client: DeviceLink, stop, failures,
+                 format_snapshot) -> tuple[int, str]:
     """Print the status once a second until the recording should end; returns the exit
     status and the reason the log is closed with."""
     from ..station.keeper import EXIT_FAILED, EXIT_OK
@@ -88,7 +90,7 @@ def _record_loop(args, rec, keeper, client, stop, failures, format_snapshot) -> 
               f"{st.bytes / 1e6:.1f} MB | {format_snapshot(client.stats.snapshot())}", flush=True)
 
 
-def _check_testbed(client, testbed, rec) -> None:
+def _check_testbed(client: CommandChannel, testbed, rec) -> None:
     """--testbed names the rig the log describes: warn (and journal it) when the device
     says it runs another one.  A device names its configuration in GET_INFO's free-text
     description; the simulated testbed names its testbed file there."""

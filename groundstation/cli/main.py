@@ -28,6 +28,7 @@ import sys
 import threading
 import time
 
+from ..core.contracts import DeviceLink
 from . import analysis as cli_analysis
 from . import campaign as cli_campaign
 from . import fg as cli_fg
@@ -155,7 +156,7 @@ def _cmd_monitor(args) -> int:
 
     publisher = start_publisher(args)
 
-    def publish(client):
+    def publish(client: DeviceLink):
         publisher.attach(client, keeper.address)
         return publisher.detach
 

@@ -9,6 +9,10 @@ so that another implementation can stand in without an adapter:
   a replay;
 - `CommandChannel`: commands with their stages, as the device link carries them
   (DeviceClient; the Station, the parameter loader and the profile player use it);
+- `DeviceLink`: both of those at once plus the session, the counters and the listeners'
+  removal - the whole face of a connection to a device (DeviceClient).  Whatever holds a
+  device connection (the station, the recorder, the uploads, the publisher, the clock)
+  takes one of these three, never the class; tests/test_architecture.py checks that;
 - `BaseMotionInstrument`: the base-disturbance function generator as a session drives
   it (instruments.fg4050.FunctionGenerator4050).
 
@@ -61,6 +65,42 @@ class CommandChannel(Protocol):
 
     def abort(self) -> Any:
         """ABORT: motors off, disarmed, whatever the state."""
+
+
+@runtime_checkable
+class DeviceLink(TelemetrySource, CommandChannel, Protocol):
+    """A connection to one device: telemetry, commands, its session and its counters."""
+
+    #: what went wrong last ('' while up): shown with a 'lost' state
+    link_error: str
+    #: the CONNECT answer (session token, testbed description, ...); {} before connect
+    device_info: dict[str, Any]
+    #: the link counters (link.stats.LinkStatistics: snapshot(), rates, losses)
+    stats: Any
+    #: how long the reader gathers telemetry into one block before delivering it (s)
+    telemetry_batch_s: float
+
+    def connect(self, take_over: bool = False) -> Any:
+        """Open a session (version and dictionary check, token, heartbeat)."""
+
+    def disconnect(self) -> None:
+        """End the session cleanly (the device disarms)."""
+
+    def commands(self, calls: Iterable[tuple[str, dict[str, Any]]], *,
+                 window: int = 16) -> list[Any]:
+        """Commands pipelined `window` at a time, waited for and checked in order."""
+
+    def remove_link_listener(self, callback: LinkListener) -> None:
+        """Stop calling `callback` on state changes."""
+
+    def remove_command_listener(self, callback: Callable[[Any], None]) -> None:
+        """Stop calling `callback` when a command ends."""
+
+    def add_raw_tap(self, callback: Callable[[str, list[bytes], list[float]], None]) -> None:
+        """Call `callback(path, chunks, host_times)` with telemetry as received."""
+
+    def remove_raw_tap(self, callback: Callable[[str, list[bytes], list[float]], None]) -> None:
+        """Stop the raw tap `callback`."""
 
 
 @runtime_checkable

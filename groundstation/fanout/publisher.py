@@ -27,6 +27,7 @@ import time
 from dataclasses import asdict
 from typing import Any, Callable
 
+from ..core.contracts import DeviceLink
 from ..core.kinds import SIMULATED_DEVICE
 from . import wire
 from .endpoints import FanoutError, check_bind
@@ -40,7 +41,7 @@ HELLO_PERIOD_S = 0.5
 UNPUBLISHED_COMMANDS = {"HEARTBEAT"}
 
 
-def device_description(client, address: str = "") -> dict[str, Any]:
+def device_description(client: DeviceLink, address: str = "") -> dict[str, Any]:
     """The device as a viewer needs it for ABORT: kind (tcp or serial), host and port."""
     from ..link.address import parse_address
 
@@ -111,7 +112,7 @@ class Publisher:
         self._hello.start()
 
     # ------------------------------------------------------------------ feeding
-    def attach(self, client, address: str = "") -> None:
+    def attach(self, client: DeviceLink, address: str = "") -> None:
         """Publish what `client` (a DeviceClient) receives, its commands and link states;
         `address` is the device address the commander opened (told to viewers for
         ABORT).  A later attach (a reconnect's new client) replaces the earlier one."""

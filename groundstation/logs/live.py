@@ -4,7 +4,8 @@ from __future__ import annotations
 
 from typing import Callable
 
-from ..link.client import CommandResult, DeviceClient
+from ..core.contracts import DeviceLink
+from ..link.client import CommandResult
 from .recorder import Recorder
 
 #: commands too frequent and too dull for the journal (the link statistics cover them)
@@ -21,7 +22,7 @@ def command_record(result: CommandResult) -> dict:
             "reply": dict(result.reply), "retries": result.retries}
 
 
-def attach_recorder(client: DeviceClient, recorder: Recorder) -> Callable[[], None]:
+def attach_recorder(client: DeviceLink, recorder: Recorder) -> Callable[[], None]:
     """Subscribe the recorder to the client's telemetry, journal every command and every
     link state change, and the link statistics once a second (drops and CRC errors with
     their times).  Returns the function that undoes all of it: a long-lived link (the

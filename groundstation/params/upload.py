@@ -22,6 +22,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from ..core.contracts import DeviceLink
 from ..core.dictionary import Dictionary
 from ..core.errors import CommandFailed, CommandRejected, GroundStationError
 from . import table as ptable
@@ -241,7 +242,7 @@ def provenance(records: list[UploadRecord], crc: int) -> Provenance:
 class ParameterLoader:
     """Uploads, reads back and rolls back parameter tables through a DeviceClient."""
 
-    def __init__(self, client, dictionary: Dictionary, history: ParameterHistory | None = None,
+    def __init__(self, client: DeviceLink, dictionary: Dictionary, history: ParameterHistory | None = None,
                  journal: Callable[[str, dict, bytes], None] | None = None):
         self.client = client
         self.d = dictionary
@@ -373,7 +374,7 @@ class _HousekeepingWaiter:
     """Watches HOUSEKEEPING for the active-table CRC from before the commit on, so a
     report that arrives between the commit and the read-back is not missed."""
 
-    def __init__(self, client, crc: int):
+    def __init__(self, client: DeviceLink, crc: int):
         self.client = client
         self.crc = crc
         self.latest: int | None = None

@@ -32,6 +32,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..core.contracts import DeviceLink
 from ..core.kinds import LinkState, ProfileOrigin
 from ..core.dictionary import Dictionary
 from ..core.errors import CommandFailed, CommandRejected, GroundStationError, LinkLostError
@@ -134,7 +135,7 @@ class PlaybackResult:
 class _Monitor:
     """Telemetry the loader and the player need, kept from the reader thread."""
 
-    def __init__(self, client):
+    def __init__(self, client: DeviceLink):
         self.client = client
         self.cond = threading.Condition()
         self.hr_tick = -1
@@ -240,7 +241,7 @@ class _Monitor:
             unsubscribe(self)
 
 
-def _explained(client, error: type[ProfileError], name: str, args: dict[str, Any]):
+def _explained(client: DeviceLink, error: type[ProfileError], name: str, args: dict[str, Any]):
     """client.command(name, **args); a refusal or failure becomes `error` with what the
     device's reason means for the operator."""
     try:
@@ -257,7 +258,7 @@ def _with_advice(error: type[ProfileError], exc: CommandRejected | CommandFailed
 class ProfileLoader:
     """Uploads profiles through a DeviceClient and confirms them on the device."""
 
-    def __init__(self, client, dictionary: Dictionary,
+    def __init__(self, client: DeviceLink, dictionary: Dictionary,
                  journal: Callable[[str, dict, bytes], None] | None = None, *,
                  gyro_range: float = DEFAULT_GYRO_RANGE, monitor: _Monitor | None = None):
         self.client = client
@@ -347,7 +348,7 @@ class ProfileLoader:
 class ProfilePlayer:
     """Loads, starts, follows and stops profiles on one device."""
 
-    def __init__(self, client, dictionary: Dictionary,
+    def __init__(self, client: DeviceLink, dictionary: Dictionary,
                  journal: Callable[[str, dict, bytes], None] | None = None, *,
                  gyro_range: float = DEFAULT_GYRO_RANGE):
         self.client = client

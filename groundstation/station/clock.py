@@ -43,6 +43,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Callable, Iterator
 
+from ..core.contracts import DeviceLink
 from ..core.kinds import BetweenSteps, LinkState
 from ..core.errors import GroundStationError, LinkLostError
 
@@ -90,7 +91,7 @@ class WallClock:
 
     fast = False
 
-    def __init__(self, client, abort: threading.Event):
+    def __init__(self, client: DeviceLink, abort: threading.Event):
         self.client = client
         self.abort = abort
 
@@ -126,7 +127,7 @@ class SteppedClock:
 
     fast = True
 
-    def __init__(self, device, client, abort: threading.Event, *,
+    def __init__(self, device, client: DeviceLink, abort: threading.Event, *,
                  pacing: FastPacing | None = None, between_steps: str = "held",
                  recorder_backlog: Callable[[], float] | None = None):
         if between_steps not in (BetweenSteps.HELD, BetweenSteps.REALTIME):

@@ -16,7 +16,7 @@ from typing import Callable
 from ..core.dictionary import Dictionary
 from ..core.errors import GroundStationError
 from ..core.kinds import LinkState, SIMULATED_DEVICE
-from ..link.client import DeviceClient
+from ..core.contracts import DeviceLink
 from .rig import LocalSimulator, open_link, start_simulator
 
 log = logging.getLogger(__name__)
@@ -45,7 +45,7 @@ class LinkKeeper:
 
     def __init__(self, dictionary: Dictionary, device: str, testbed: str | None = None, *,
                  take_over: bool = False,
-                 on_client: Callable[[DeviceClient], Callable[[], None]] | None = None,
+                 on_client: Callable[[DeviceLink], Callable[[], None]] | None = None,
                  say: Callable[[str], None] = print):
         self.dictionary = dictionary
         self.device = device
@@ -53,13 +53,13 @@ class LinkKeeper:
         self.take_over = take_over
         self.on_client = on_client
         self.say = say
-        self.client: DeviceClient | None = None
+        self.client: DeviceLink | None = None
         self.sim: LocalSimulator | None = None
         self.address = ""
         self.reconnects = 0
         self._detach: Callable[[], None] | None = None
 
-    def open(self) -> DeviceClient:
+    def open(self) -> DeviceLink:
         """Start the simulator if asked for, open the link and connect; raises
         GroundStationError (with the device's reason) if that fails."""
         if self.device == SIMULATED_DEVICE:
@@ -79,7 +79,7 @@ class LinkKeeper:
         client.connect(take_over=self.take_over)
         return client
 
-    def reopen(self, stop: threading.Event) -> DeviceClient | None:
+    def reopen(self, stop: threading.Event) -> DeviceLink | None:
         """After a lost link: close the old client and try again, waiting the back-off
         delays in between, until connected (returns the client) or `stop` is set (None)."""
         attempt = 0

@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable
 
+from ..core.contracts import DeviceLink
 from ..core.errors import GroundStationError
 from ..logs import Recorder
 from ..logs.live import attach_recorder
@@ -36,7 +37,7 @@ class RecordingSlot:
     def active(self) -> bool:
         return self.recorder is not None
 
-    def start(self, client, dictionary, testbed, folder: Path, name: str, notes: str = "",
+    def start(self, client: DeviceLink, dictionary, testbed, folder: Path, name: str, notes: str = "",
               on_failure: Callable[[str], None] | None = None,
               chunk_rows: int | None = None, writer_niceness: int = 0) -> Path:
         """`chunk_rows`, `writer_niceness`: the log's HDF5 chunking and the writer
@@ -70,7 +71,7 @@ class RecordingSlot:
         self.echo(f"recording {path}")
         return path
 
-    def attach(self, client) -> None:
+    def attach(self, client: DeviceLink) -> None:
         """A new link of the same session (a reconnect): the recording goes on on it."""
         if self.recorder is not None and self.recorder.state == "recording":
             self.detach()
@@ -82,7 +83,7 @@ class RecordingSlot:
         if detach is not None:
             detach()
 
-    def stop(self, client) -> tuple[dict[str, Any], Any]:
+    def stop(self, client: DeviceLink) -> tuple[dict[str, Any], Any]:
         """Close it; returns (entry, RecorderStatus)."""
         rec = self.recorder
         if rec is None:
@@ -154,7 +155,7 @@ def device_record(simulated: bool, *, address: str = "", seed: int = 0, fast: bo
     return {"device": "rig", "address": address}
 
 
-def link_drops(client) -> int:
+def link_drops(client: DeviceLink) -> int:
     """Frames lost on the link so far (sequence gaps, every packet)."""
     if client is None:
         return 0

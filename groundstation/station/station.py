@@ -49,11 +49,10 @@ from pathlib import Path
 from typing import Any, Callable, Mapping
 
 from .clock import ScriptAborted, SteppedClock, WallClock
-from ..core.contracts import BaseMotionInstrument
+from ..core.contracts import BaseMotionInstrument, DeviceLink
 from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import GroundStationError
 from ..core.kinds import SIMULATED_DEVICE, BetweenSteps, LinkState
-from ..link.client import DeviceClient
 from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
@@ -122,7 +121,7 @@ class Station:
         self.abort_event = threading.Event()
         self.state = DeviceStateTracker()
         #: the device link: a CommandChannel and a TelemetrySource (core/contracts.py)
-        self.client: DeviceClient | None = None
+        self.client: DeviceLink | None = None
         self.address = ""
         self.clock: WallClock | SteppedClock | None = None
         self.generator: BaseMotionInstrument | None = None
@@ -145,7 +144,8 @@ class Station:
 
     # ------------------------------------------------------------------ session
     @classmethod
-    def attach(cls, client, *, testbed: str | Path | None = None, generator=None,
+    def attach(cls, client: DeviceLink, *, testbed: str | Path | None = None,
+               generator: str | BaseMotionInstrument | None = None,
                log_folder: str | Path = "logs", history=None,
                journal: Callable[[str, dict, bytes], None] | None = None,
                operator: Callable[[str], bool] | None = None,

@@ -9,7 +9,8 @@ from pathlib import Path
 
 import pytest
 
-from groundstation.core.contracts import BaseMotionInstrument, CommandChannel, TelemetrySource
+from groundstation.core.contracts import (BaseMotionInstrument, CommandChannel, DeviceLink,
+                                          TelemetrySource)
 from groundstation.instruments.fg4050 import FunctionGenerator4050
 from groundstation.link.client import DeviceClient
 from groundstation.logs.replay import ReplaySource
@@ -20,8 +21,14 @@ INERTIAL = ROOT / "profiles" / "testbeds" / "inertial_2dof.toml"
 
 
 def protocol_methods(protocol) -> list[str]:
-    return [name for name, value in vars(protocol).items()
-            if callable(value) and not name.startswith("_")]
+    """The contract's methods, its own and those of the contracts it is made of."""
+    names = []
+    for part in protocol.__mro__:
+        if part.__module__ != protocol.__module__:
+            continue                       # Protocol, Generic, object
+        names += [name for name, value in vars(part).items()
+                  if callable(value) and not name.startswith("_") and name not in names]
+    return names
 
 
 def signature_problems(protocol, cls) -> list[str]:
@@ -56,6 +63,7 @@ def signature_problems(protocol, cls) -> list[str]:
 @pytest.mark.parametrize("protocol, cls", [(TelemetrySource, DeviceClient),
                                            (TelemetrySource, ReplaySource),
                                            (CommandChannel, DeviceClient),
+                                           (DeviceLink, DeviceClient),
                                            (BaseMotionInstrument, FunctionGenerator4050)])
 def test_signatures_match(protocol, cls):
     assert protocol_methods(protocol)
@@ -81,6 +89,7 @@ def test_live_objects_are_instances_of_their_contracts(tmp_path):
     with Testbed("sim", testbed=INERTIAL, fast=True, generator="sim",
                  log_folder=tmp_path) as tb:
         assert isinstance(tb.client, TelemetrySource) and isinstance(tb.client, CommandChannel)
+        assert isinstance(tb.client, DeviceLink)
         assert isinstance(tb.generator, BaseMotionInstrument)
         tb.start_recording("contract")
         tb.dwell(0.2)
@@ -89,6 +98,7 @@ def test_live_objects_are_instances_of_their_contracts(tmp_path):
     try:
         assert isinstance(replay, TelemetrySource)
         assert not isinstance(replay, CommandChannel)          # a replay cannot command
+        assert not isinstance(replay, DeviceLink)
         seen = []
         replay.subscribe(seen.append)
         replay.unsubscribe(seen.append)

@@ -35,6 +35,7 @@ from pathlib import Path
 from PySide6.QtCore import QObject, Signal
 
 from ...campaign import ACTIONS, Campaign, CampaignReport, CampaignRunner, Step, StepResult
+from ...core.contracts import BaseMotionInstrument
 from ...station.clock import ScriptAborted
 from ...core.errors import GroundStationError
 from ...core.kinds import SIMULATED_DEVICE, LinkState
@@ -182,7 +183,8 @@ class CampaignController(QObject):
         self._thread.start()
         return None
 
-    def _work(self, campaign: Campaign, folder: Path, cap: float | None, generator) -> None:
+    def _work(self, campaign: Campaign, folder: Path, cap: float | None,
+              generator: str | BaseMotionInstrument | None) -> None:
         session = self.session
         report: CampaignReport | None = None
         tb: Testbed | None = None

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
+from ...core.contracts import DeviceLink
 from ...core.dictionary import Dictionary
 from ...core.errors import GroundStationError
 from ...core.kinds import LinkState
@@ -39,7 +40,7 @@ class Consoles:
 
     # ------------------------------------------------------------------ publishing
     def start_publishing(self, endpoint: str, curve_keys: str | None = None,
-                         client=None, address: str = "") -> bool:
+                         client: DeviceLink | None = None, address: str = "") -> bool:
         """Publish on `endpoint` what this window's device link receives, now (`client`,
         opened on `address`, when one is up) and after every `link_up`."""
         # imported here: ZeroMQ is loaded only by a window that uses the fan-out
@@ -56,7 +57,7 @@ class Consoles:
                                         f"groundstation gui --watch {self.publisher.endpoint}")
         return True
 
-    def link_up(self, client, address: str) -> None:
+    def link_up(self, client: DeviceLink, address: str) -> None:
         """A device link of this window came up (a reconnect's too): published, if we
         publish."""
         if self.publisher is not None:
