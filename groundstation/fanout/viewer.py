@@ -33,6 +33,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
+from ..core.callbacks import Callbacks
 from ..core.kinds import LinkState
 from ..codec import DatagramDecoder, FrameCodec
 from ..link.client import CommandResult, StageRecord
@@ -94,10 +95,10 @@ class WatchClient:
         self.link_error = ""
         #: the publisher's newest hello (device, protocol, the commander's link health)
         self.hello: dict[str, Any] = {}
-        self._subscribers: list[Callable] = []
-        self._link_listeners: list[Callable[[str, str], None]] = []
-        self._command_listeners: list[Callable[[CommandResult], None]] = []
-        self._remote_listeners: list[Callable[[str, str], None]] = []
+        self._subscribers = Callbacks("telemetry subscriber", log)
+        self._link_listeners = Callbacks("link listener", log)
+        self._command_listeners = Callbacks("command listener", log)
+        self._remote_listeners = Callbacks("remote link listener", log)
         self._expected: int | None = None
         self._instance: str | None = None
         self._stop = threading.Event()
@@ -111,30 +112,27 @@ class WatchClient:
 
     # ------------------------------------------------------------------ contract
     def subscribe(self, callback: Callable) -> None:
-        self._subscribers.append(callback)
+        self._subscribers.add(callback)
 
     def unsubscribe(self, callback: Callable) -> None:
-        if callback in self._subscribers:
-            self._subscribers.remove(callback)
+        self._subscribers.remove(callback)
 
     def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        self._link_listeners.append(callback)
+        self._link_listeners.add(callback)
 
     def remove_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        if callback in self._link_listeners:
-            self._link_listeners.remove(callback)
+        self._link_listeners.remove(callback)
 
     def add_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
         """Hears the commander's commands (from the publisher) and this console's ABORTs."""
-        self._command_listeners.append(callback)
+        self._command_listeners.add(callback)
 
     def remove_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
-        if callback in self._command_listeners:
-            self._command_listeners.remove(callback)
+        self._command_listeners.remove(callback)
 
     def add_remote_listener(self, callback: Callable[[str, str], None]) -> None:
         """`callback(state, message)` when the commander's device link changes state."""
-        self._remote_listeners.append(callback)
+        self._remote_listeners.add(callback)
 
     @property
     def device(self) -> dict[str, Any] | None:
@@ -305,11 +303,7 @@ class WatchClient:
             if block.name == "RESPONSE":
                 continue
             self.stats.update(block)
-            for cb in list(self._subscribers):
-                try:
-                    cb(block)
-                except Exception:
-                    log.exception("telemetry subscriber %r failed", cb)
+            self._subscribers(block)
 
     def _on_hello(self, record: dict[str, Any]) -> None:
         first = not self.hello
@@ -333,26 +327,14 @@ class WatchClient:
         self._notify_command(result)
 
     def _notify_command(self, result: CommandResult) -> None:
-        for cb in list(self._command_listeners):
-            try:
-                cb(result)
-            except Exception:
-                log.exception("command listener failed")
+        self._command_listeners(result)
 
     def _remote(self, state: str, message: str) -> None:
-        for cb in list(self._remote_listeners):
-            try:
-                cb(state, message)
-            except Exception:
-                log.exception("remote link listener failed")
+        self._remote_listeners(state, message)
 
     def _set_state(self, state: str, message: str) -> None:
         self.link_state, self.link_error = state, message
-        for cb in list(self._link_listeners):
-            try:
-                cb(state, message)
-            except Exception:
-                log.exception("link listener failed")
+        self._link_listeners(state, message)
 
     def close(self) -> None:
         """Stop watching; safe to call twice."""

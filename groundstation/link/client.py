@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any, Callable, Iterable
 
+from ..core.callbacks import Callbacks
 from ..core.kinds import LinkState
 from ..codec import DatagramDecoder, FrameCodec, StreamDeframer, TelemetryBlock
 from ..codec.frames import decode_items, encode_items
@@ -94,9 +95,9 @@ class DeviceClient:
         self.intake = TelemetryIntake(dictionary, getattr(command_link, "peer", None)
                                       if telemetry is not None else None)
         self.stats.add_framing_source(self.intake.counters)
-        self._subscribers: list[Callable[[TelemetryBlock], None]] = []
-        self._link_listeners: list[Callable[[str, str], None]] = []
-        self._command_listeners: list[Callable[[CommandResult], None]] = []
+        self._subscribers = Callbacks("telemetry subscriber", log)
+        self._link_listeners = Callbacks("link listener", log)
+        self._command_listeners = Callbacks("command listener", log)
         #: called with the bytes as received (fanout/publisher.py), on the reader thread
         self._raw_taps: list[Callable[[str, list[bytes], list[float]], None]] = []
         self._pending: dict[int, _Pending] = {}
@@ -129,38 +130,37 @@ class DeviceClient:
         self.device_gone: Callable[[], str] | None = None
         self.heartbeat_failures = 0
         self.unmatched_responses = 0
-        self.subscriber_errors = 0
 
     # ------------------------------------------------------------------ plumbing
+    @property
+    def subscriber_errors(self) -> int:
+        """How many times a telemetry subscriber raised (each is logged)."""
+        return self._subscribers.failures
+
     def subscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
         """Call `callback(block)` for every decoded telemetry block (receiver thread)."""
-        self._subscribers.append(callback)
+        self._subscribers.add(callback)
 
     def unsubscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
         """Stop calling `callback` (no error if it was not subscribed)."""
-        try:
-            self._subscribers.remove(callback)
-        except ValueError:
-            pass
+        self._subscribers.remove(callback)
 
     def remove_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        if callback in self._link_listeners:
-            self._link_listeners.remove(callback)
+        self._link_listeners.remove(callback)
 
     def remove_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
-        if callback in self._command_listeners:
-            self._command_listeners.remove(callback)
+        self._command_listeners.remove(callback)
 
     def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
         """Call `callback(state, message)` on link state changes: 'up', 'lost', 'closed',
         or 'ended' (the device ended this host's session: another host took it over;
         the message says who and when)."""
-        self._link_listeners.append(callback)
+        self._link_listeners.add(callback)
 
     def add_command_listener(self, callback: Callable[["CommandResult"], None]) -> None:
         """Call `callback(result)` when any command ends (completed, refused, failed or
         timed out), e.g. to journal it in the log."""
-        self._command_listeners.append(callback)
+        self._command_listeners.add(callback)
 
     def add_raw_tap(self, callback: Callable[[str, list[bytes], list[float]], None]) -> None:
         """Call `callback(path, chunks, times)` with the device's telemetry as received, on
@@ -209,11 +209,7 @@ class DeviceClient:
     def _set_state(self, state: str, message: str) -> None:
         self.link_state = state
         self.link_error = message
-        for cb in list(self._link_listeners):
-            try:
-                cb(state, message)
-            except Exception:  # a broken listener must not take the link down
-                log.exception("link listener failed")
+        self._link_listeners(state, message)
 
     def _dispatch(self, blocks: list[TelemetryBlock], path: str) -> None:
         for block in self.intake.blocks(blocks, path):
@@ -224,12 +220,7 @@ class DeviceClient:
             if block.name == "EVENT":
                 for level, code, text in zip(block["level"], block["code"], block["text"]):
                     log.info("device event %s %s: %s", level, self.dictionary.event_name(int(code)), text)
-            for cb in list(self._subscribers):
-                try:
-                    cb(block)
-                except Exception:
-                    self.subscriber_errors += 1
-                    log.exception("telemetry subscriber %r failed", cb)
+            self._subscribers(block)
 
     def _read_stream(self) -> None:
         while not self._stop.is_set():
@@ -393,11 +384,7 @@ class DeviceClient:
         """The command is no longer followed: forget it, tell the listeners."""
         with self._lock:
             self._pending.pop(p.result.sequence, None)
-        for cb in list(self._command_listeners):
-            try:
-                cb(p.result)
-            except Exception:
-                log.exception("command listener failed")
+        self._command_listeners(p.result)
 
     def _await(self, sent: tuple) -> CommandResult:
         """Wait for a sent command's answer (resending it unanswered) and its end."""

@@ -31,6 +31,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from ..core.callbacks import Callbacks
 from ..core.kinds import LinkState
 from ..codec import TelemetryBlock
 from ..core.dictionary import Dictionary
@@ -89,10 +90,9 @@ class ReplaySource:
         self.link_state = LinkState.UP
         self.link_error = ""
         self.error: Exception | None = None     # what stopped the replay ('lost'), if anything
-        self.subscriber_errors = 0
         self.frames_delivered = 0
-        self._subscribers: list[Callable[[TelemetryBlock], None]] = []
-        self._listeners: list[Callable[[str, str], None]] = []
+        self._subscribers = Callbacks("replay subscriber", log)
+        self._listeners = Callbacks("replay listener", log)
         rng = self._reader.time_range()
         self._start_time, self._end_time = rng if rng else (0.0, 0.0)
         self._position: float | None = None
@@ -108,27 +108,25 @@ class ReplaySource:
         self._thread.start()
 
     # --------------------------------------------------------------- consumer interface
+    @property
+    def subscriber_errors(self) -> int:
+        """How many times a subscriber raised (each is logged)."""
+        return self._subscribers.failures
+
     def subscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
         """Call `callback(block)` for every replayed block (in the replay thread)."""
-        self._subscribers.append(callback)
+        self._subscribers.add(callback)
 
     def unsubscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
         """Stop calling `callback` (no error if it was not subscribed)."""
-        try:
-            self._subscribers.remove(callback)
-        except ValueError:
-            pass
+        self._subscribers.remove(callback)
 
     def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
         """Call `callback(state, message)`: 'finished', 'up', 'lost', 'closed'."""
-        self._listeners.append(callback)
+        self._listeners.add(callback)
 
     def _notify(self, state: str, message: str = "") -> None:
-        for cb in list(self._listeners):
-            try:
-                cb(state, message)
-            except Exception:
-                log.exception("replay listener failed")
+        self._listeners(state, message)
 
     # --------------------------------------------------------------- controls
     def play(self) -> None:
@@ -367,12 +365,7 @@ class ReplaySource:
         subscribers; `stop()` is asked after each block.  Returns the index reached."""
         for k, block in self._reader.runs(w, w.k, k_end):
             self.stats.update(block)
-            for cb in list(self._subscribers):
-                try:
-                    cb(block)
-                except Exception:
-                    self.subscriber_errors += 1
-                    log.exception("replay subscriber %r failed", cb)
+            self._subscribers(block)
             self.frames_delivered += k - w.k
             self._position = float(w.timeline[k - 1])
             w.k = k

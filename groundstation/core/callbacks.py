@@ -1,0 +1,49 @@
+"""A list of callbacks that a source of events calls in turn.
+
+The live link, a log replay and a read-only console each deliver telemetry blocks, link
+states and finished commands to whoever subscribed: the charts, the recorder, the
+journal, a script.  They share one rule, kept here: a callback that raises is logged
+and counted and the others are still called, because a broken chart must not take the
+link (or the replay, or the console) down with it.  Adding and removing may happen on
+any thread while the source calls: each call walks a copy of the list.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Callable
+
+
+class Callbacks:
+    """Callbacks called in the order they were added; `failures` counts the raises."""
+
+    def __init__(self, what: str, logger: logging.Logger) -> None:
+        #: what a callback is, for the log line of a failure ("telemetry subscriber")
+        self.what = what
+        self.failures = 0
+        self._log = logger
+        self._callbacks: list[Callable[..., Any]] = []
+
+    def add(self, callback: Callable[..., Any]) -> None:
+        self._callbacks.append(callback)
+
+    def remove(self, callback: Callable[..., Any]) -> None:
+        """Stop calling `callback`; no error if it was never added (or already removed)."""
+        try:
+            self._callbacks.remove(callback)
+        except ValueError:
+            return
+
+    def __call__(self, *args: Any) -> None:
+        for callback in list(self._callbacks):
+            try:
+                callback(*args)
+            except Exception:
+                self.failures += 1
+                self._log.exception("%s %r failed", self.what, callback)
+
+    def __len__(self) -> int:
+        return len(self._callbacks)
+
+    def __contains__(self, callback: object) -> bool:
+        return callback in self._callbacks
