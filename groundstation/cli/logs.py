@@ -79,11 +79,9 @@ def _record_loop(args, rec, keeper, client: DeviceLink, stop, failures,
         if ending is not None:
             return ending.status, ending.reason or stop.reason
         client = keeper.client
-        if stop.event.is_set():
-            return EXIT_OK, stop.reason
-        if t_end is not None and time.monotonic() >= t_end:
-            return EXIT_OK, f"duration of {args.duration:g} s reached"
-        if stop.event.wait(min(1.0, max(0.0, t_end - time.monotonic())) if t_end else 1.0):
+        if (reason := stop.ending(t_end, args.duration)) is not None:
+            return EXIT_OK, reason
+        if not stop.status_due(t_end):
             continue
         st = rec.status()
         print(f"{st.path.name if st.path else ''}: {st.frames} frames, "

@@ -14,7 +14,7 @@ import math
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -354,31 +354,44 @@ def _parse_items(raw_items, where: str, reserved: set[str] = frozenset()) -> tup
     return items
 
 
+def _numbered_tables(doc: dict, kind: str, path: Path, code_key: str, code_max: int):
+    """Each [[kind]] table of `doc` with where it is (for messages), its name and its
+    code (`code_key`, checked to be in 1..code_max); at least one table is required."""
+    raw_tables = doc.get(kind)
+    if not isinstance(raw_tables, list) or not raw_tables:
+        raise DictionaryError(f"{path}: no [[{kind}]] tables")
+    for n, raw in enumerate(raw_tables):
+        name = _require(raw, "name", f"{path}: {kind} #{n + 1}", str)
+        where = f"{path}: {kind} '{name}'"
+        code = _require(raw, code_key, where, int)
+        if not 0 < code <= code_max:
+            raise DictionaryError(f"{where}: {code_key} {code} outside 1..{code_max}")
+        yield raw, where, name, code
+
+
+def _check_unique(defs: list, kind: str, path: Path, code_key: str,
+                  show_code: Callable[[int], str]) -> None:
+    """No two of `defs` share a name or a code: the first clash is named, with all of its
+    holders."""
+    for attr in ("name", code_key):
+        values = [getattr(d, attr) for d in defs]
+        dupes = {v for v in values if values.count(v) > 1}
+        if dupes:
+            v = min(dupes)
+            names = ", ".join(f"'{d.name}'" for d in defs if getattr(d, attr) == v)
+            shown = show_code(v) if attr == code_key else f"'{v}'"
+            raise DictionaryError(f"{path}: {kind} {attr} {shown} used twice: {kind}s {names}")
+
+
 def _parse_packets(doc: dict, path: Path) -> tuple[PacketDef, ...]:
     packets = []
-    raw_packets = doc.get("packet")
-    if not isinstance(raw_packets, list) or not raw_packets:
-        raise DictionaryError(f"{path}: no [[packet]] tables")
-    for n, raw in enumerate(raw_packets):
-        where = f"{path}: packet #{n + 1}"
-        name = _require(raw, "name", where, str)
-        where = f"{path}: packet '{name}'"
-        pid = _require(raw, "id", where, int)
-        if not 0 < pid < 256:
-            raise DictionaryError(f"{where}: id {pid} outside 1..255")
+    for raw, where, name, pid in _numbered_tables(doc, "packet", path, "id", 255):
         items = _parse_items(raw.get("items", []), where, reserved={"sequence", "tick"})
         packets.append(PacketDef(
             name=name, id=pid, direction=str(raw.get("direction", "device_to_host")),
             description=str(raw.get("description", "")), items=items,
             rate_hz=raw.get("rate_hz")))
-    for attr in ("name", "id"):
-        values = [getattr(p, attr) for p in packets]
-        dupes = {v for v in values if values.count(v) > 1}
-        if dupes:
-            v = min(dupes)
-            names = ", ".join(f"'{p.name}'" for p in packets if getattr(p, attr) == v)
-            shown = f"0x{v:02X}" if attr == "id" else f"'{v}'"
-            raise DictionaryError(f"{path}: packet {attr} {shown} used twice: packets {names}")
+    _check_unique(packets, "packet", path, "id", lambda v: f"0x{v:02X}")
     return tuple(packets)
 
 
@@ -387,16 +400,7 @@ def _parse_commands(doc: dict, path: Path) -> tuple[tuple[CommandDef, ...], dict
                 "heartbeat_period_s": 0.2}
     defaults.update(doc.get("defaults", {}))
     commands = []
-    raw_commands = doc.get("command")
-    if not isinstance(raw_commands, list) or not raw_commands:
-        raise DictionaryError(f"{path}: no [[command]] tables")
-    for n, raw in enumerate(raw_commands):
-        where = f"{path}: command #{n + 1}"
-        name = _require(raw, "name", where, str)
-        where = f"{path}: command '{name}'"
-        opcode = _require(raw, "opcode", where, int)
-        if not 0 < opcode < 65536:
-            raise DictionaryError(f"{where}: opcode {opcode} outside 1..65535")
+    for raw, where, name, opcode in _numbered_tables(doc, "command", path, "opcode", 65535):
         commands.append(CommandDef(
             name=name, opcode=opcode, description=str(raw.get("description", "")),
             args=_parse_items(raw.get("args", []), f"{where} args"),
@@ -404,14 +408,7 @@ def _parse_commands(doc: dict, path: Path) -> tuple[tuple[CommandDef, ...], dict
             critical=bool(raw.get("critical", False)),
             needs_session=bool(raw.get("needs_session", True)),
             timeout_s=float(raw.get("timeout_s", defaults["timeout_s"]))))
-    for attr in ("name", "opcode"):
-        values = [getattr(c, attr) for c in commands]
-        dupes = {v for v in values if values.count(v) > 1}
-        if dupes:
-            v = min(dupes)
-            names = ", ".join(f"'{c.name}'" for c in commands if getattr(c, attr) == v)
-            shown = f"0x{v:04X} ({v})" if attr == "opcode" else f"'{v}'"
-            raise DictionaryError(f"{path}: command {attr} {shown} used twice: commands {names}")
+    _check_unique(commands, "command", path, "opcode", lambda v: f"0x{v:04X} ({v})")
     return tuple(commands), defaults
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import signal
 import threading
+import time
 
 REASONS = {signal.SIGINT: "interrupted by the operator (Ctrl-C)",
            signal.SIGTERM: "terminated (SIGTERM)"}
@@ -42,3 +43,18 @@ class StopRequest:
         for sig, handler in self._previous.items():
             signal.signal(sig, handler)
         self._previous.clear()
+
+    def ending(self, t_end: float | None, duration_s: float | None) -> str | None:
+        """Why a timed loop finishes now - the request's reason, or its duration
+        reached (`t_end` on the monotonic clock) - or None to go on."""
+        if self.event.is_set():
+            return self.reason
+        if t_end is not None and time.monotonic() >= t_end:
+            return f"duration of {duration_s:g} s reached"
+        return None
+
+    def status_due(self, t_end: float | None) -> bool:
+        """Wait up to a second (not past `t_end`) for the next status line: True when it
+        is due, False when a stop was requested meanwhile (the loop checks again)."""
+        wait_s = min(1.0, max(0.0, t_end - time.monotonic())) if t_end is not None else 1.0
+        return not self.event.wait(wait_s)

@@ -183,11 +183,9 @@ def _record_loop(args, viewer, rec, stop, failures) -> tuple[int, str]:
         if viewer.failure is not None:
             print(f"error: {viewer.failure}", file=sys.stderr, flush=True)
             return EXIT_FAILED, viewer.failure
-        if stop.event.is_set():
-            return EXIT_OK, stop.reason
-        if t_end is not None and time.monotonic() >= t_end:
-            return EXIT_OK, f"duration of {args.duration:g} s reached"
-        if stop.event.wait(min(1.0, max(0.0, t_end - time.monotonic())) if t_end else 1.0):
+        if (reason := stop.ending(t_end, args.duration)) is not None:
+            return EXIT_OK, reason
+        if not stop.status_due(t_end):
             continue
         st = rec.status()
         print(f"{st.path.name if st.path else ''}: {st.frames} frames | {status_line(viewer)}",

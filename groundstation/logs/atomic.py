@@ -16,6 +16,19 @@ from pathlib import Path
 from typing import Iterator
 
 
+def create_new(path: str | Path) -> bool:
+    """Create `path` as an empty file if no file has that name, atomically (O_EXCL: two
+    processes racing for one name never both get it); False if the name is taken.
+    Other OSErrors (no such folder, no permission, disk full) are raised.  0o666: the
+    umask decides the permissions, as for any file written directly."""
+    try:
+        fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+    except FileExistsError:
+        return False
+    os.close(fd)
+    return True
+
+
 def _describe(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
@@ -30,15 +43,10 @@ def atomic_output(path: str | Path, error_cls: type[Exception]) -> Iterator[Path
     while True:
         tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.part"
         try:
-            # O_EXCL: never reuse someone else's file; 0o666 lets the umask decide the
-            # final file's permissions, as for a file written directly
-            fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except FileExistsError:
-            continue
+            if create_new(tmp):
+                break
         except OSError as exc:
             raise error_cls(f"cannot write {path}: {_describe(exc)}") from None
-        os.close(fd)
-        break
     try:
         yield tmp
         os.replace(tmp, path)

@@ -15,7 +15,6 @@ import contextlib
 import errno
 import logging
 import multiprocessing as mp
-import os
 import queue
 import shutil
 import signal
@@ -32,6 +31,7 @@ import numpy as np
 from ..codec import TelemetryBlock
 from ..core.dictionary import Dictionary
 from ..core.errors import GroundStationError
+from .atomic import create_new
 from .messages import Closed, Failed, Flushed, Frames, JournalEntry, Started, StartFailed, Stop, Stopped
 from .schema import JOURNAL_KINDS
 from .writer import writer_main
@@ -105,14 +105,10 @@ def reserve_log_path(folder: str | Path, test_name: str = "test",
             break
         previous = path
         try:
-            # 0o666: the umask decides the log's permissions, as for any new file
-            fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-        except FileExistsError:
-            continue
+            if create_new(path):
+                return path, n
         except OSError as exc:
             raise RecorderError(f"cannot create the log file: {explain_error(exc, path)}") from None
-        os.close(fd)
-        return path, n
     raise RecorderError(f"no free file name for '{template}' in {folder}: "
                         f"{_file_name(template, test_name, start, now)} and the names after "
                         "it are taken - choose another --name or folder")

@@ -293,6 +293,12 @@ BROKEN = {
     "duplicate_opcode": (
         "commands.toml", "opcode = 0x0034", "opcode = 0x0033",
         ["opcode", "0x0033", "PROFILE_START", "PROFILE_STOP"]),
+    "duplicate_command_name": (
+        "commands.toml", 'name = "SET_MODE"\nopcode', 'name = "ARM"\nopcode',
+        ["command name 'ARM' used twice", "commands 'ARM', 'ARM'"]),
+    "opcode_out_of_range": (
+        "commands.toml", "opcode = 0x0034", "opcode = 0x10000",
+        ["opcode 65536 outside 1..65535"]),
     "command_arg_unknown_type": (
         "commands.toml", '{ name = "enable", type = "u8"', '{ name = "enable", type = "bool"',
         ["FRICTION_COMP", "enable", "bool"]),
