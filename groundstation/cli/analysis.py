@@ -11,9 +11,9 @@ from __future__ import annotations
 import argparse
 import csv
 import json
-import math
 import sys
 from pathlib import Path
+from . import arguments
 
 # the analysis package's choices, repeated here so that parsing needs no numpy
 # (tests/analysis/test_analysis_log.py checks they are the same)
@@ -85,34 +85,10 @@ def _metrics(text: str) -> tuple[str, ...]:
     return wanted
 
 
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0 < value < math.inf:
-        raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
-    return value
 
 
-def _fraction(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0 <= value <= 1:
-        raise argparse.ArgumentTypeError(f"must be a fraction from 0 to 1, not {text}")
-    return value
 
 
-def _seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number of seconds: {text!r}") from None
-    if not math.isfinite(value):
-        raise argparse.ArgumentTypeError(f"not a finite number of seconds: {text}")
-    return value
 
 
 def add_parsers(sub) -> None:
@@ -126,16 +102,16 @@ def add_parsers(sub) -> None:
     s.add_argument("--metrics", type=_metrics, default=METRICS,
                    help=f"comma-separated, from {','.join(ALL_METRICS)} "
                         f"(default: {','.join(METRICS)})")
-    s.add_argument("--from", dest="start", type=_seconds, default=None,
+    s.add_argument("--from", dest="start", type=arguments.seconds, default=None,
                    help="window start, s of device time from the log's start (default: its start)")
-    s.add_argument("--to", dest="stop", type=_seconds, default=None,
+    s.add_argument("--to", dest="stop", type=arguments.seconds, default=None,
                    help="window end, s from the log's start (default: its end)")
     s.add_argument("--sensor", choices=SENSORS, default=SENSORS[0],
                    help="LOS signal scored (default: autocollimator, the reference's scoring sensor)")
-    s.add_argument("--integration-period", type=_positive, default=1.0, metavar="S",
+    s.add_argument("--integration-period", type=arguments.positive, default=1.0, metavar="S",
                    help="sensor integration period T for the high-pass and windowed figures "
                         "(default 1 s)")
-    s.add_argument("--max-excluded-fraction", type=_fraction, default=None, metavar="F",
+    s.add_argument("--max-excluded-fraction", type=arguments.fraction, default=None, metavar="F",
                    help="a window with more than this fraction excluded (sensor out of range "
                         "or at its rail, frames missing) is marked not valid (default 0.01)")
     s.add_argument("--design", default="auto", metavar="auto|none|FILE",
@@ -143,7 +119,7 @@ def add_parsers(sub) -> None:
                         "lightly damped mode, from the design the log records uploading (auto, "
                         "the default; only when the window ran in its closed-loop mode), from "
                         "FILE, or none")
-    s.add_argument("--psd-segment", type=_positive, default=10.0, metavar="S",
+    s.add_argument("--psd-segment", type=arguments.positive, default=10.0, metavar="S",
                    help="Welch segment length (default 10 s: 0.1 Hz resolution)")
     s.add_argument("--testbed", default=None, metavar="FILE",
                    help="testbed file for the autocollimator range and motor resistances "
@@ -175,7 +151,7 @@ def add_parsers(sub) -> None:
                    help="local: worker processes on this host (default for a batch); none: a "
                         "serial loop in this process; tcp://HOST:8786: a dask.distributed "
                         "cluster whose workers see the logs under the same paths")
-    b.add_argument("--workers", type=_count, default=None, metavar="N",
+    b.add_argument("--workers", type=arguments.count, default=None, metavar="N",
                    help="local worker processes (default: one per core)")
     b.add_argument("--serial", action="store_true", help="the same as --scheduler none")
     s.set_defaults(func=_cmd_analyze)
@@ -188,14 +164,6 @@ def _scheduler(text: str) -> str:
                                      f"not {text!r}")
 
 
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a whole number: {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be >= 1, not {text}")
-    return value
 
 
 def _expand(names: list[str]) -> list[str]:

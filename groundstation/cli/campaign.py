@@ -28,6 +28,7 @@ from pathlib import Path
 
 from ..core.kinds import GeneratorChoice
 from ..core.errors import GroundStationError
+from . import arguments
 
 EXIT_OK, EXIT_FAILED, EXIT_MALFORMED = 0, 1, 2
 EXIT_INTERRUPTED = 130            # 128 + SIGINT, as a shell reports Ctrl-C
@@ -79,7 +80,7 @@ def add_parsers(sub) -> argparse._SubParsersAction:
     s.add_argument("--allow-setup-change", action="store_true",
                    help="with --resume: allow a device, clock, seed or testbed other than the "
                         "report's (its runs then come from two set-ups; the report says so)")
-    s.add_argument("--max-step-seconds", type=_positive_seconds, default=None,
+    s.add_argument("--max-step-seconds", type=arguments.positive_seconds, default=None,
                    help="cap every dwell and profile at S seconds (trial runs and tests; "
                         "a base-motion profile keeps its period)")
     s.add_argument("--seed", type=int, default=None, help="simulator seed (default 0)")
@@ -115,14 +116,6 @@ def add_parsers(sub) -> argparse._SubParsersAction:
     return actions
 
 
-def _positive_seconds(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = float("nan")
-    if not (value > 0 and value != float("inf")):
-        raise argparse.ArgumentTypeError(f"must be a finite number of seconds > 0, not {text!r}")
-    return value
 
 
 def _cmd_show(args) -> int:

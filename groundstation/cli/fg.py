@@ -46,6 +46,7 @@ from typing import TYPE_CHECKING
 
 from ..core.contracts import BaseMotionInstrument
 from ..core.errors import GroundStationError
+from . import arguments
 
 if TYPE_CHECKING:
     import numpy as np
@@ -451,28 +452,16 @@ def _cmd_off(args) -> int:
     return 0
 
 
-def _non_negative(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0 <= value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be >= 0, not {text}")
-    return value
 
 
-def _positive(text: str) -> float:
-    value = _non_negative(text)
-    if value < 0.001:
-        raise argparse.ArgumentTypeError(f"must be at least 0.001, not {text}")
-    return value
 
 
-def _fraction(text: str) -> float:
-    value = _non_negative(text)
-    if value >= 1:
-        raise argparse.ArgumentTypeError(f"a fraction below 1 (0.1 = 10 %), not {text}")
-    return value
+
+
+#: a VISA timeout shorter than a millisecond cannot be kept by any instrument
+_AT_LEAST_A_MILLI = arguments.number(lambda v: 0.001 <= v < math.inf,
+                                     "must be at least 0.001")
+_FRACTION_BELOW_ONE = arguments.number(lambda v: 0 <= v < 1, "a fraction below 1 (0.1 = 10 %)")
 
 
 def _common_arguments(p, resource: bool = True) -> None:
@@ -488,7 +477,7 @@ def _common_arguments(p, resource: bool = True) -> None:
         p.add_argument("--testbed", default=None,
                        help="testbed file whose [limits] apply (default: "
                             "profiles/testbeds/inertial_2dof.toml)")
-        p.add_argument("--timeout", type=_positive, default=5.0, help="VISA timeout, s")
+        p.add_argument("--timeout", type=_AT_LEAST_A_MILLI, default=5.0, help="VISA timeout, s")
 
 
 def _channel_argument(p) -> None:
@@ -498,7 +487,7 @@ def _channel_argument(p) -> None:
 def _output_arguments(p) -> None:
     p.add_argument("--output", choices=("on", "off"), default="off",
                    help="on: switch the output on after setting (for --hold s), then off")
-    p.add_argument("--hold", type=_non_negative, default=None,
+    p.add_argument("--hold", type=arguments.non_negative, default=None,
                    help="with --output on: seconds to keep the output on (default: until "
                         "Ctrl-C)")
 
@@ -520,7 +509,7 @@ def _profile_arguments(p, journal_defaults: bool = False) -> None:
 
 
 def _verdict_arguments(p) -> None:
-    p.add_argument("--tolerance", type=_fraction, default=DEFAULT_TOLERANCE,
+    p.add_argument("--tolerance", type=_FRACTION_BELOW_ONE, default=DEFAULT_TOLERANCE,
                    help="largest |achieved/target - 1| of the RMS that passes (default 0.1)")
     p.add_argument("--csv", default=None, metavar="FILE",
                    help="write the CSP curves (frequency_hz, target_csp_rad2, "
@@ -580,7 +569,7 @@ def _add_profile_commands(fsub) -> None:
     s.add_argument("--testbed", default=None,
                    help="testbed whose base-stage model made the profile (default: "
                         "profiles/testbeds/inertial_2dof.toml)")
-    s.add_argument("--end", type=_non_negative, default=None, metavar="S",
+    s.add_argument("--end", type=arguments.non_negative, default=None, metavar="S",
                    help="the window ends S seconds after the start of the log")
     s.add_argument("--periods", type=int, default=1, help="whole waveform periods to compare")
     _verdict_arguments(s)

@@ -37,6 +37,7 @@ from . import params as cli_params
 from . import profile as cli_profile
 from .. import __version__
 from ..core.errors import GroundStationError
+from . import arguments
 
 
 def load_dictionary(protocol_dir=None):
@@ -246,14 +247,6 @@ def _add_console_options(s, *, watch: bool = True, publish: bool = True) -> None
                    help="--watch with --curve-keys: this console's key pair (default viewer)")
 
 
-def _positive_float(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be > 0, not {text}")
-    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -283,7 +276,7 @@ def build_parser() -> argparse.ArgumentParser:
                    help="testbed file (default: profiles/testbeds/relative_2dof.toml)")
     s.add_argument("--pacing", choices=["realtime", "fast"], default="realtime")
     s.add_argument("--seed", type=int, default=0)
-    s.add_argument("--speed", type=_positive_float, default=1.0,
+    s.add_argument("--speed", type=arguments.positive, default=1.0,
                    help="realtime pacing: control periods per 1/1200 s of wall time "
                         "(10: a 10x burst of 12 000 frames/s; default 1)")
     s.add_argument("--frames-per-datagram", type=int, default=1)

@@ -1,0 +1,38 @@
+"""Number types for argparse options, with the rule each option's value must meet.
+
+A bad value on the command line is answered by argparse with exit status 2 and a line
+that names the option, the value given and what it must be ("--psd-segment: must be > 0,
+not -3"), before anything is opened or started.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from typing import Callable
+
+
+def number(accept: Callable[[float], bool], must: str, *, convert: Callable = float,
+           what: str = "a number") -> Callable[[str], float]:
+    """An argparse `type`: `convert(text)`, refused unless `accept(value)`; `must` is
+    the rule in words, `what` the kind of value expected."""
+    def parse(text: str):
+        try:
+            value = convert(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not {what}: {text!r}") from None
+        if not accept(value):
+            raise argparse.ArgumentTypeError(f"{must}, not {text}")
+        return value
+    parse.__name__ = what.split()[-1]           # argparse's fallback wording
+    return parse
+
+
+positive = number(lambda v: 0 < v < math.inf, "must be > 0")
+non_negative = number(lambda v: 0 <= v < math.inf, "must be >= 0")
+fraction = number(lambda v: 0 <= v <= 1, "must be a fraction from 0 to 1")
+seconds = number(math.isfinite, "must be a finite number of seconds",
+                 what="a number of seconds")
+positive_seconds = number(lambda v: 0 < v < math.inf, "must be a finite number of seconds > 0",
+                          what="a number of seconds")
+count = number(lambda v: v >= 1, "must be >= 1", convert=int, what="a whole number")
