@@ -47,3 +47,35 @@ class Callbacks:
 
     def __contains__(self, callback: object) -> bool:
         return callback in self._callbacks
+
+
+class TelemetryOutlet:
+    """The subscriber side of a telemetry source - the TelemetrySource contract's
+    subscribe/unsubscribe and link listeners - for the live link, a log replay and a
+    read-only console alike.  The source calls `self._subscribers(block)` for each
+    block it delivers and `self._link_listeners(state, message)` when its state changes
+    (each source's class says which states it reports)."""
+
+    def __init__(self, what: str, logger: logging.Logger) -> None:
+        self._subscribers = Callbacks(f"{what} subscriber", logger)
+        self._link_listeners = Callbacks(f"{what} link listener", logger)
+
+    @property
+    def subscriber_errors(self) -> int:
+        """How many times a subscriber raised (each is logged, the others still called)."""
+        return self._subscribers.failures
+
+    def subscribe(self, callback: Callable[[Any], None]) -> None:
+        """Call `callback(block)` for every block delivered, on the source's own thread."""
+        self._subscribers.add(callback)
+
+    def unsubscribe(self, callback: Callable[[Any], None]) -> None:
+        """Stop calling `callback` (no error if it was not subscribed)."""
+        self._subscribers.remove(callback)
+
+    def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
+        """Call `callback(state, message)` when the source's state changes."""
+        self._link_listeners.add(callback)
+
+    def remove_link_listener(self, callback: Callable[[str, str], None]) -> None:
+        self._link_listeners.remove(callback)

@@ -33,7 +33,7 @@ from collections import deque
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-from ..core.callbacks import Callbacks
+from ..core.callbacks import Callbacks, TelemetryOutlet
 from ..core.kinds import LinkState
 from ..codec import DatagramDecoder, FrameCodec
 from ..link.client import CommandResult, StageRecord
@@ -72,7 +72,7 @@ class FanoutCounters:
         return {k: v for k, v in self.__dict__.items() if k != "recent_errors"}
 
 
-class WatchClient:
+class WatchClient(TelemetryOutlet):
     """Watches a publishing station: see the module docstring."""
 
     def __init__(self, dictionary, endpoint: str, *, curve_keys: str | None = None,
@@ -95,8 +95,7 @@ class WatchClient:
         self.link_error = ""
         #: the publisher's newest hello (device, protocol, the commander's link health)
         self.hello: dict[str, Any] = {}
-        self._subscribers = Callbacks("telemetry subscriber", log)
-        self._link_listeners = Callbacks("link listener", log)
+        super().__init__("telemetry", log)
         self._command_listeners = Callbacks("command listener", log)
         self._remote_listeners = Callbacks("remote link listener", log)
         self._expected: int | None = None
@@ -111,18 +110,6 @@ class WatchClient:
         self._wake = threading.Event()
 
     # ------------------------------------------------------------------ contract
-    def subscribe(self, callback: Callable) -> None:
-        self._subscribers.add(callback)
-
-    def unsubscribe(self, callback: Callable) -> None:
-        self._subscribers.remove(callback)
-
-    def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        self._link_listeners.add(callback)
-
-    def remove_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        self._link_listeners.remove(callback)
-
     def add_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
         """Hears the commander's commands (from the publisher) and this console's ABORTs."""
         self._command_listeners.add(callback)

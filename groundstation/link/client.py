@@ -19,7 +19,7 @@ from dataclasses import dataclass, field
 from datetime import datetime
 from typing import Any, Callable, Iterable
 
-from ..core.callbacks import Callbacks
+from ..core.callbacks import Callbacks, TelemetryOutlet
 from ..core.kinds import LinkState
 from ..codec import DatagramDecoder, FrameCodec, StreamDeframer, TelemetryBlock
 from ..codec.frames import decode_items, encode_items
@@ -76,8 +76,11 @@ class _Pending:
         self.on_stage: Callable[[StageRecord], None] | None = None
 
 
-class DeviceClient:
-    """Talks to one device (the rig's controller or the simulated testbed)."""
+class DeviceClient(TelemetryOutlet):
+    """Talks to one device (the rig's controller or the simulated testbed).
+
+    Link listeners hear 'up', 'lost', 'closed', or 'ended' (the device ended this host's
+    session: another host took it over; the message says who and when)."""
 
     def __init__(self, dictionary: Dictionary, command_link: StreamTransport,
                  telemetry: UdpReceiver | None = None, *, heartbeat: bool = True):
@@ -95,8 +98,7 @@ class DeviceClient:
         self.intake = TelemetryIntake(dictionary, getattr(command_link, "peer", None)
                                       if telemetry is not None else None)
         self.stats.add_framing_source(self.intake.counters)
-        self._subscribers = Callbacks("telemetry subscriber", log)
-        self._link_listeners = Callbacks("link listener", log)
+        super().__init__("telemetry", log)
         self._command_listeners = Callbacks("command listener", log)
         #: called with the bytes as received (fanout/publisher.py), on the reader thread
         self._raw_taps: list[Callable[[str, list[bytes], list[float]], None]] = []
@@ -132,30 +134,8 @@ class DeviceClient:
         self.unmatched_responses = 0
 
     # ------------------------------------------------------------------ plumbing
-    @property
-    def subscriber_errors(self) -> int:
-        """How many times a telemetry subscriber raised (each is logged)."""
-        return self._subscribers.failures
-
-    def subscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
-        """Call `callback(block)` for every decoded telemetry block (receiver thread)."""
-        self._subscribers.add(callback)
-
-    def unsubscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
-        """Stop calling `callback` (no error if it was not subscribed)."""
-        self._subscribers.remove(callback)
-
-    def remove_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        self._link_listeners.remove(callback)
-
     def remove_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
         self._command_listeners.remove(callback)
-
-    def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        """Call `callback(state, message)` on link state changes: 'up', 'lost', 'closed',
-        or 'ended' (the device ended this host's session: another host took it over;
-        the message says who and when)."""
-        self._link_listeners.add(callback)
 
     def add_command_listener(self, callback: Callable[["CommandResult"], None]) -> None:
         """Call `callback(result)` when any command ends (completed, refused, failed or

@@ -31,7 +31,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from ..core.callbacks import Callbacks
+from ..core.callbacks import TelemetryOutlet
 from ..core.kinds import LinkState
 from ..codec import TelemetryBlock
 from ..core.dictionary import Dictionary
@@ -61,7 +61,7 @@ def _check_speed(speed: Any) -> float | None:
     return s
 
 
-class ReplaySource:
+class ReplaySource(TelemetryOutlet):
     """A recorded log played back through the live link's consumer interface.
 
     Starts paused at the beginning; `play()`, `pause()`, `step(n)`, `seek(t)`,
@@ -91,8 +91,7 @@ class ReplaySource:
         self.link_error = ""
         self.error: Exception | None = None     # what stopped the replay ('lost'), if anything
         self.frames_delivered = 0
-        self._subscribers = Callbacks("replay subscriber", log)
-        self._listeners = Callbacks("replay listener", log)
+        super().__init__("replay", log)
         rng = self._reader.time_range()
         self._start_time, self._end_time = rng if rng else (0.0, 0.0)
         self._position: float | None = None
@@ -108,25 +107,8 @@ class ReplaySource:
         self._thread.start()
 
     # --------------------------------------------------------------- consumer interface
-    @property
-    def subscriber_errors(self) -> int:
-        """How many times a subscriber raised (each is logged)."""
-        return self._subscribers.failures
-
-    def subscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
-        """Call `callback(block)` for every replayed block (in the replay thread)."""
-        self._subscribers.add(callback)
-
-    def unsubscribe(self, callback: Callable[[TelemetryBlock], None]) -> None:
-        """Stop calling `callback` (no error if it was not subscribed)."""
-        self._subscribers.remove(callback)
-
-    def add_link_listener(self, callback: Callable[[str, str], None]) -> None:
-        """Call `callback(state, message)`: 'finished', 'up', 'lost', 'closed'."""
-        self._listeners.add(callback)
-
     def _notify(self, state: str, message: str = "") -> None:
-        self._listeners(state, message)
+        self._link_listeners(state, message)
 
     # --------------------------------------------------------------- controls
     def play(self) -> None:

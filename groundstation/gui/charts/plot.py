@@ -94,59 +94,57 @@ class _KeptBounds:
         self._rect = None
 
 
-class _ValueAxis(pg.AxisItem):
+def _kept_axis(base: type[pg.AxisItem]) -> type[pg.AxisItem]:
+    """`base` (pyqtgraph's AxisItem or a subclass of it) with its bounding rect kept
+    (_KeptBounds) and its tick labels' sizes cached (_TextSizeCache).  A class made from
+    its base rather than a mixin: Qt calls these overrides on the C++ side, so they
+    must sit on the one class pyqtgraph instantiates."""
+
+    class KeptAxis(base):
+        def __init__(self, orientation: str) -> None:
+            # before the base class: its constructor already restyles and resizes the axis
+            self._bounds = _KeptBounds()
+            super().__init__(orientation=orientation)
+            self._text_sizes = _TextSizeCache()
+
+        def boundingRect(self):
+            return self._bounds.rect(self, super().boundingRect)
+
+        def resizeEvent(self, ev=None):
+            self._bounds.forget()
+            super().resizeEvent(ev)
+
+        def setStyle(self, **kwargs):
+            self._bounds.forget()
+            super().setStyle(**kwargs)
+
+        def generateDrawSpecs(self, p):
+            return super().generateDrawSpecs(self._text_sizes.wrap(p))
+
+    KeptAxis.__name__ = KeptAxis.__qualname__ = f"Kept{base.__name__}"
+    return KeptAxis
+
+
+class _ValueAxis(_kept_axis(pg.AxisItem)):
     """Left axis; its bounding rect is kept and its tick labels' sizes are cached."""
 
     def __init__(self) -> None:
-        # before the base class: its constructor already restyles and resizes the axis
-        self._bounds = _KeptBounds()
         super().__init__(orientation="left")
-        self._text_sizes = _TextSizeCache()
-
-    def boundingRect(self):
-        return self._bounds.rect(self, super().boundingRect)
-
-    def resizeEvent(self, ev=None):
-        self._bounds.forget()
-        super().resizeEvent(ev)
-
-    def setStyle(self, **kwargs):
-        self._bounds.forget()
-        super().setStyle(**kwargs)
-
-    def generateDrawSpecs(self, p):
-        return super().generateDrawSpecs(self._text_sizes.wrap(p))
 
 
-class _TimeAxis(pg.DateAxisItem):
+class _TimeAxis(_kept_axis(pg.DateAxisItem)):
     """Bottom axis: plain seconds in device time, wall-clock labels in host time, or
     (`relative`, a live chart) seconds before the newest sample.  Its bounding rect is
     kept as the value axis's is."""
 
     def __init__(self) -> None:
-        self._bounds = _KeptBounds()       # before the base class, as for _ValueAxis
         super().__init__(orientation="bottom")
-        self._text_sizes = _TextSizeCache()
         self.host = False
         self.relative = False
         self.shown = True          # only the bottom plot of the stack labels its time axis
         # No labels on the finest tick level: they never fit on a strip chart's time axis,
         # yet every one of them was measured on every scroll step.
         self.setStyle(maxTextLevel=1)
-
-    def boundingRect(self):
-        return self._bounds.rect(self, super().boundingRect)
-
-    def resizeEvent(self, ev=None):
-        self._bounds.forget()
-        super().resizeEvent(ev)
-
-    def setStyle(self, **kwargs):
-        self._bounds.forget()
-        super().setStyle(**kwargs)
-
-    def generateDrawSpecs(self, p):
-        return super().generateDrawSpecs(self._text_sizes.wrap(p))
 
     def tickValues(self, minVal, maxVal, size):
         if self.host and not self.relative:
