@@ -36,3 +36,15 @@ seconds = number(math.isfinite, "must be a finite number of seconds",
 positive_seconds = number(lambda v: 0 < v < math.inf, "must be a finite number of seconds > 0",
                           what="a number of seconds")
 count = number(lambda v: v >= 1, "must be >= 1", convert=int, what="a whole number")
+
+
+def command_group(sub: argparse._SubParsersAction, name: str, help_text: str,
+                  *adders: Callable[[argparse._SubParsersAction], None]
+                  ) -> argparse._SubParsersAction:
+    """`groundstation NAME ACTION ...`: a command of several actions, each declared by
+    one of `adders` on the group's subparsers (returned, for a module to add more)."""
+    group = sub.add_parser(name, help=help_text)
+    actions = group.add_subparsers(dest=f"{name}_action", required=True, metavar="ACTION")
+    for add in adders:
+        add(actions)
+    return actions

@@ -23,6 +23,7 @@ from __future__ import annotations
 import argparse
 import sys
 
+from . import arguments
 from .station import add_device_options, command_station, fail, print_progress
 from ..core.errors import GroundStationError
 
@@ -31,14 +32,9 @@ EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
 
 def add_parsers(sub) -> argparse._SubParsersAction:
     """Add `params` to the CLI's subcommands; returns its own subparsers for more actions."""
-    p = sub.add_parser("params", help="controller designs and the parameter table")
-    actions = p.add_subparsers(dest="params_action", required=True, metavar="ACTION")
-    _add_validate(actions)
-    _add_upload(actions)
-    _add_show(actions)
-    _add_rollback(actions)
-    _add_analyze(actions)
-    return actions
+    return arguments.command_group(sub, "params", "controller designs and the parameter table",
+                                   _add_validate, _add_upload, _add_show, _add_rollback,
+                                   _add_analyze)
 
 
 def _add_validate(actions) -> None:

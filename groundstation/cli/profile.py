@@ -18,6 +18,7 @@ import argparse
 import sys
 
 from ..core.kinds import ProfileOrigin
+from . import arguments
 from .station import add_device_options, fail, print_progress
 from ..core.errors import GroundStationError
 
@@ -27,11 +28,9 @@ MODES = ("OPEN_LOOP", "RELATIVE", "INERTIAL")
 
 def add_parsers(sub) -> argparse._SubParsersAction:
     """Add `profile` to the CLI's subcommands; returns its own subparsers for more actions."""
-    p = sub.add_parser("profile", help="command profiles: show one, play one on the device")
-    actions = p.add_subparsers(dest="profile_action", required=True, metavar="ACTION")
-    _add_show(actions)
-    _add_play(actions)
-    return actions
+    return arguments.command_group(sub, "profile",
+                                   "command profiles: show one, play one on the device",
+                                   _add_show, _add_play)
 
 
 def _add_show(actions) -> None:
