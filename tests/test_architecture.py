@@ -231,6 +231,51 @@ def test_the_window_session_imports_no_widgets():
     assert not offenders, offenders
 
 
+#: what computes rather than shows: the window asks analysis/, live/ and params/ for
+#: figures and draws them (unit and dB/degree conversions, axis ranges and the colours
+#: of a band are presentation and stay in gui/)
+NUMERIC_MODULES = ("scipy", "numpy.fft", "numpy.linalg", "numpy.polynomial", "numpy.random",
+                   "numba")
+NUMERIC_CALLS = {"cumsum", "cumprod", "trapz", "trapezoid", "convolve", "correlate", "polyfit",
+                 "polyval", "mean", "nanmean", "std", "nanstd", "var", "median", "histogram",
+                 "gradient", "interp", "fft", "rfft", "lstsq", "solve", "inv", "eig"}
+
+
+def numerics_in(path: Path, name: str) -> list[str]:
+    found = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            modules = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
+            modules = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+        else:
+            modules = []
+        found += [f"{name}:{node.lineno}: imports {m}" for m in modules
+                  if any(m == n or m.startswith(n + ".") for n in NUMERIC_MODULES)]
+        if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
+                and isinstance(node.func.value, ast.Name) and node.func.value.id in ("np", "numpy")
+                and node.func.attr in NUMERIC_CALLS):
+            found.append(f"{name}:{node.lineno}: np.{node.func.attr}()")
+    return found
+
+
+def test_the_window_does_no_numerics():
+    """Spectra, integrals, statistics, fits and solvers live in the Qt-free packages,
+    where the CLI, the reports and the tests use the same code the window shows."""
+    found = []
+    for path in sorted((PKG / "gui").rglob("*.py")):
+        found += numerics_in(path, path.relative_to(PKG).as_posix())
+    assert not found, "\n".join(found)
+
+
+def test_the_numerics_rule_sees_an_integral_and_a_scipy_import(tmp_path):
+    sample = tmp_path / "view.py"
+    sample.write_text("import numpy as np\nfrom scipy.signal import welch\n"
+                      "total = np.sqrt(np.cumsum(p * df))\nlabel = np.log10(x)\n")
+    assert [f.split(": ", 1)[1] for f in numerics_in(sample, "view.py")] == [
+        "imports scipy.signal", "imports scipy.signal.welch", "np.cumsum()"]
+
+
 #: the longest a function may be, in lines from its `def` to its last line
 MAX_FUNCTION_LINES = 80
 #: where longer functions stand: the simulator's compiled core, written as one loop per

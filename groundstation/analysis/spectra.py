@@ -50,6 +50,14 @@ def csp(frequency_hz, psd) -> np.ndarray:
     return cumulative_trapezoid(p, f, initial=0.0)
 
 
+def band_rms(frequency_hz, psd) -> float:
+    """The RMS a PSD holds between its first and last frequency: the square root of
+    its trapezoidal integral (the cumulative spectral power's end value); NaN with
+    fewer than two frequencies."""
+    power = csp(frequency_hz, psd)
+    return float(np.sqrt(power[-1])) if len(power) > 1 else float("nan")
+
+
 @dataclass(frozen=True)
 class Spectrum:
     """A one-sided Welch PSD and what it was computed from."""

@@ -11,8 +11,8 @@ import pytest
 from scipy import signal
 
 from groundstation.analysis import AnalysisError, WelchAccumulator, csp, psd
-from groundstation.analysis.spectra import (MIN_SEGMENT, psd_by_time, runs, segment_samples,
-                                             time_breaks)
+from groundstation.analysis.spectra import (MIN_SEGMENT, band_rms, psd_by_time, runs,
+                                             segment_samples, time_breaks)
 from groundstation.core.dictionary import default_control_rate_hz
 
 RATE_HZ = default_control_rate_hz()
@@ -180,3 +180,15 @@ def test_the_base_motion_check_uses_this_csp():
     p = np.exp(-f)
     np.testing.assert_array_equal(csp_from_psd(f, p), csp(f, p))
     assert verify.csp_from_psd(f, p)[-1] == pytest.approx(float(np.trapezoid(p, f)))
+
+
+def test_band_rms_is_the_root_of_the_trapezoid_and_parseval_holds():
+    """A flat 2 units²/Hz from 1 to 9 Hz holds 16 units²: RMS 4.  A sine's Welch PSD
+    integrates back to its RMS (amplitude / sqrt 2)."""
+    assert band_rms([1.0, 5.0, 9.0], [2.0, 2.0, 2.0]) == pytest.approx(4.0)
+    assert np.isnan(band_rms([1.0], [2.0]))
+    rate = 1200.0
+    t = np.arange(int(20 * rate)) / rate
+    spectrum = psd_by_time(t, 3e-3 * np.sin(2 * np.pi * 37.0 * t), np.empty(0))
+    assert band_rms(spectrum.frequency_hz, spectrum.density) == pytest.approx(
+        3e-3 / np.sqrt(2), rel=0.02)

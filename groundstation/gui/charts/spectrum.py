@@ -6,8 +6,9 @@ the chosen channel and has the ground station's Welch PSD computed from it
 scaling, one-sided).  Sequence gaps and NaN split the record: only segments wholly
 inside one contiguous stretch are averaged, so lost frames never get spliced into a
 fake step.  The text line gives the total RMS (the square
-root of the PSD integrated over the shown band) — the cumulative-RMS curve's end
-value — and the frequency of the largest peak.
+root of the PSD integrated over the shown band, analysis.spectra.band_rms, the same
+trapezoid as the analysis's cumulative spectral power) and the frequency of the
+largest peak.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import pyqtgraph as pg
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from ...analysis.spectra import MIN_SEGMENT, psd_by_time
+from ...analysis.spectra import MIN_SEGMENT, band_rms, psd_by_time
 from ...core.dictionary import Dictionary
 from ...live.display_buffers import TelemetryStore
 from .channel_tree import channel_catalog, display_unit, format_value
@@ -27,14 +28,6 @@ from ..common.steady_label import SteadyLabel
 
 SECONDS_CHOICES = (1, 2, 5, 10, 30, 60)
 REFRESH_HZ = 4.0
-
-
-def cumulative_rms(freqs: np.ndarray, psd: np.ndarray) -> np.ndarray:
-    """sqrt of the PSD integrated from the lowest frequency up to each frequency."""
-    if len(freqs) < 2:
-        return np.zeros_like(psd)
-    df = np.diff(freqs, prepend=freqs[0] - (freqs[1] - freqs[0]))
-    return np.sqrt(np.cumsum(psd * df))
 
 
 class SpectrumView(QWidget):
@@ -151,7 +144,7 @@ class SpectrumView(QWidget):
                                    f"<i>fewer than {MIN_SEGMENT} gap-free samples</i>")
             return
         self.curve.setData(self.freqs, self.psd, skipFiniteCheck=True)
-        self.total_rms = float(cumulative_rms(self.freqs, self.psd)[-1])
+        self.total_rms = band_rms(self.freqs, self.psd)
         peak = self.freqs[int(np.argmax(self.psd))]
         self.rms_label.setText(
             f"RMS {format_value(self.total_rms, unit)} "
