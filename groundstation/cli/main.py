@@ -92,6 +92,11 @@ def _cmd_sim(args) -> int:
     from ..sim import SimulatedDevice
     from ..plant.testbed import load_testbed
 
+    # Started by a ground station (--announce): end with it, even if it was killed.  Its
+    # pid is taken now, while it is certainly alive (it waits for our LISTENING line):
+    # taken after that line, a parent that exits at once was already gone, the child
+    # took init for its parent and ran on forever (seen on a busy machine, 1 start in 6).
+    parent = os.getppid() if args.announce else None
     stop = threading.Event()
     # Ctrl-C and SIGTERM both ask for a clean stop, whenever they come (even during start)
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -129,8 +134,6 @@ def _cmd_sim(args) -> int:
         pty = PtyMasterStream()
         dev.attach_stream(pty)
         print(f"serial link on serial://{pty.slave_name}", flush=True)
-    # started by a ground station (--announce): end with it, even if it was killed
-    parent = os.getppid() if args.announce else None
     try:
         while not stop.wait(0.5):
             if parent is not None and os.getppid() != parent:
