@@ -24,7 +24,6 @@ function's value by less than 1e-14, relative.
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from dataclasses import dataclass, replace
@@ -33,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.kinds import Setup
+from ..core.tomlfile import relative_path, toml_number, toml_string
 from .design_file import ControllerDesign, load_design
 from .discretise import _singular_text, singular_factors
 from .tf_algebra import (CANCEL_TOLERANCE, CONTROL_RATE_HZ, DesignError, TransferFunction,
@@ -121,28 +121,7 @@ def controller_problems(design: ControllerDesign) -> list[str]:
 # the file
 # ======================================================================================
 def _number(x: float) -> str:
-    x = float(x)
-    if not math.isfinite(x):
-        raise DesignError(f"cannot write the number {x!r}: a design file holds finite numbers")
-    text = f"{x + 0.0:.15g}"
-    return text if any(c in text for c in ".en") else text + ".0"
-
-
-def _string(text: str) -> str:
-    return json.dumps(text, ensure_ascii=False)        # a TOML basic string
-
-
-def _relative(target: Path, folder: Path) -> str:
-    """`target` relative to `folder` when they share more than the file system's root
-    (../testbeds/x.toml, as the shipped files write it), otherwise absolute."""
-    target, folder = Path(target).resolve(), folder.resolve()
-    try:
-        common = Path(os.path.commonpath([target, folder]))
-    except ValueError:                                 # another drive
-        return target.as_posix()
-    if common == Path(common.anchor):
-        return target.as_posix()
-    return Path(os.path.relpath(target, folder)).as_posix()
+    return toml_number(x, DesignError)
 
 
 def _factors_line(factors: tuple[Factor, ...]) -> str:
@@ -170,35 +149,35 @@ def design_text(design: ControllerDesign, path: str | Path, *, name: str | None 
     lines = [f"# {name or design.name}: written by the ground station's design workbench"
              + (f" from {source}" if source else ""),
              "# Factors: [a] is (s + a), [b, c] is (s^2 + b s + c), [0] is s; `gain` multiplies them.",
-             "", "[design]", f"name = {_string(name or design.name)}"]
+             "", "[design]", f"name = {toml_string(name or design.name)}"]
     desc = design.description if description is None else description
     if desc:
-        lines.append(f"description = {_string(desc)}")
-    lines += [f"mode = {_string(design.mode)}",
-              f"testbed = {_string(_relative(design.testbed.path, folder))}"]
+        lines.append(f"description = {toml_string(desc)}")
+    lines += [f"mode = {toml_string(design.mode)}",
+              f"testbed = {toml_string(relative_path(design.testbed.path, folder))}"]
     if design.outer_loop_gain_per_s is not None:
         lines.append(f"outer_loop_gain_per_s = {_number(design.outer_loop_gain_per_s)}")
     if design.prewarp_hz is not None:
         lines.append(f"prewarp_hz = {_number(design.prewarp_hz)}")
     lines += ["", "[saturation]", f"coarse_in_oz = {_number(design.saturation_coarse_in_oz)}",
               f"fine_in_oz = {_number(design.saturation_fine_in_oz)}",
-              f"anti_windup = {_string(design.anti_windup)}", "", "[friction_compensation]"]
+              f"anti_windup = {toml_string(design.anti_windup)}", "", "[friction_compensation]"]
     fc = design.friction
     lines.append(f"enabled = {'true' if fc.enabled else 'false'}")
     if fc.model is not None:
-        lines.append(f"model = {_string(fc.model)}")
+        lines.append(f"model = {toml_string(fc.model)}")
     for key, value in (("sigma_in_oz_per_rad", fc.sigma_in_oz_per_rad),
                        ("coulomb_torque_in_oz", fc.coulomb_torque_in_oz), ("alpha", fc.alpha)):
         if value is not None:
             lines.append(f"{key} = {_number(value)}")
     if fc.slope_table is not None:
-        lines.append(f"slope_table = {_string(_relative(fc.slope_table, folder))}")
+        lines.append(f"slope_table = {toml_string(relative_path(fc.slope_table, folder))}")
     lines.append("")
     unit = "in-oz/(rad/s)" if design.mode == Setup.INERTIAL else "in-oz/rad"
     if c0_equivalent_to is not None:
         lines += [f"# c0 = {design.c0.text()}   {unit}",
                   "# (output-equivalent: recomputed from that design when this file is read)",
-                  "[c0]", f"equivalent_to = {_string(_relative(c0_equivalent_to, folder))}"]
+                  "[c0]", f"equivalent_to = {toml_string(relative_path(c0_equivalent_to, folder))}"]
         if cancel_tolerance is not None and cancel_tolerance != CANCEL_TOLERANCE:
             lines.append(f"cancel_tolerance = {_number(cancel_tolerance)}")
         lines.append("")

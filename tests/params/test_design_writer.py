@@ -69,9 +69,9 @@ def test_paths_are_relative_beside_the_shipped_files(tmp_path):
 
 
 def test_a_path_sharing_only_the_root_is_written_absolute():
-    from groundstation.params.design_writer import _relative
-    assert _relative(Path("/srv/lab/testbeds/a.toml"), Path("/home/op/designs")) == "/srv/lab/testbeds/a.toml"
-    assert _relative(Path("/srv/lab/testbeds/a.toml"), Path("/srv/lab/designs")) == "../testbeds/a.toml"
+    from groundstation.core.tomlfile import relative_path
+    assert relative_path(Path("/srv/lab/testbeds/a.toml"), Path("/home/op/designs")) == "/srv/lab/testbeds/a.toml"
+    assert relative_path(Path("/srv/lab/testbeds/a.toml"), Path("/srv/lab/designs")) == "../testbeds/a.toml"
 
 
 def test_factors_from_roots():
