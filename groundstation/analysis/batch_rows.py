@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from ..core.errors import GroundStationError
-from .log_identification import DEFAULT_MIN_COHERENCE
+from .log_frf import DEFAULT_MIN_COHERENCE
 from .validity import MAX_EXCLUDED_FRACTION
 
 #: every key of a row, in the order of the CSV columns (cli_analysis.ROW_KEYS is this list)
@@ -49,7 +49,8 @@ def extra_results(path: str | Path, extras: tuple[str, ...], *, start_s: float |
                   min_coherence: float = DEFAULT_MIN_COHERENCE) -> dict[str, Any]:
     """{metric: result, or the error message} of the extra metrics of one log."""
     from .log_friction_velocity import friction_velocity_from_log
-    from .log_identification import frf_from_log, hysteresis_from_log
+    from .log_frf import frf_from_log
+    from .log_hysteresis import hysteresis_from_log
     from .log_step import step_from_log
 
     out: dict[str, Any] = {}

@@ -2,7 +2,7 @@
 what a constant-velocity-ramp log holds (the steady_state_friction campaign's).
 
 The bearing's angle is ``encoder_outer`` (phi1).  The torque across the bearing is made
-from the channels as hysteresis_from_log makes it (log_identification.py), with the
+from the channels as hysteresis_from_log makes it (log_hysteresis.py), with the
 coarse torque command as the default drive:
 
     T_f = T1 - T2 + k·(phi2 - phi1)     2-DOF testbed, the fine drive and both encoders logged
@@ -35,9 +35,9 @@ from .friction_velocity import (DEFAULT_BLOCK_S, DEFAULT_MIN_SEGMENT_S, DEFAULT_
                                 DEFAULT_SETTLE_TOLERANCE, DEFAULT_SETTLED_FRACTION,
                                 DEFAULT_TOLERANCE, BlockAccumulator, FrictionVelocity,
                                 segments_from_blocks)
-from .log_identification import (PACKET, LogIdentificationError, NoExcitationError,
-                                 WindowTooShortError, _require, _testbed_info, _window_rows,
-                                 coarse_torque_constant)
+from .log_window import (PACKET, LogIdentificationError, NoExcitationError,
+                         WindowTooShortError, coarse_torque_constant, require_channels,
+                         testbed_info, window_rows)
 
 #: the coarse drives accepted: channel -> (kind, the fine motor's twin)
 DRIVES = {"torque_coarse_cmd": ("torque", "torque_fine_cmd"),
@@ -218,11 +218,11 @@ def friction_velocity_from_log(path: str | Path, start_s: float | None = None,
     name = Path(path).name
     notes: list[str] = []
     with LogReader(path) as r:
-        _require(r, [ANGLE_CHANNEL, drive_channel], "friction against velocity")
+        require_channels(r, [ANGLE_CHANNEL, drive_channel], "friction against velocity")
         have = {c.name for c in r.channels(PACKET)}
-        i0, i1 = _window_rows(r, start_s, stop_s)
+        i0, i1 = window_rows(r, start_s, stop_s)
         origin = r.origin("device")
-        tbi = _testbed_info(r, testbed)
+        tbi = testbed_info(r, testbed)
         if trim_to_profile and "profile_index" in have:
             i0, i1 = _narrow_to_profile(r, i0, i1, chunk_rows, origin, notes)
         model = _torque_model(tbi, name, drive_channel, coupling, have, notes)

@@ -17,8 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from ..logs import LogReader
-from .log_identification import (PACKET, LogIdentificationError, WindowTooShortError,
-                                 _longest_run, _require, _window_rows)
+from .log_window import (PACKET, LogIdentificationError, WindowTooShortError, longest_run,
+                         require_channels, window_rows)
 from .step import StepMetrics, step_metrics
 
 #: the least net change of the reference that counts as a step [rad]
@@ -77,9 +77,9 @@ def step_from_log(path: str | Path, start_s: float | None = None, stop_s: float 
     WindowTooShortError, StepMetricsError (e.g. too few samples after the step), LogError."""
     needed = ["reference", "error_angle"] + ([effort_channel] if effort_channel else [])
     with LogReader(path) as r:
-        _require(r, needed, "a step response")
+        require_channels(r, needed, "a step response")
         chans = {c.name: c for c in r.channels(PACKET)}
-        i0, i1 = _window_rows(r, start_s, stop_s)
+        i0, i1 = window_rows(r, start_s, stop_s)
         d = r.read_rows(PACKET, needed, i0, i1)
         origin = r.origin("device")
         rate = r.tick_rate_hz
@@ -107,7 +107,7 @@ def step_from_log(path: str | Path, start_s: float | None = None, stop_s: float 
         raise NoStepError(f"{name}: the reference makes no step in the window {t[0]:.3f}.."
                           f"{t[-1]:.3f} s (largest change {abs(size):.3g} rad, a step must "
                           f"exceed {MIN_STEP_RAD:g} rad)")
-    _, _, missing = _longest_run(t, rate)
+    _, _, missing = longest_run(t, rate)
     if missing:
         notes.append(f"{missing} frame(s) missing in the window (not bridged)")
     if b > a:

@@ -142,7 +142,7 @@ def excited_current(path, start_s, stop_s) -> tuple[str, dict[str, float], str]:
     """(the current channel that varies most, {channel: its RMS about its mean, A}, how
     it was chosen) over the frames that play a profile in the window (all of the window
     if none does); read in chunks."""
-    from ..analysis.log_identification import MissingChannelError
+    from ..analysis.log_window import MissingChannelError
 
     from ..logs import LogReader
 
@@ -190,7 +190,7 @@ def _accumulate(acc: list, x: np.ndarray) -> None:
 
 
 def _frf(path, start_s, stop_s):
-    from ..analysis.log_identification import frf_from_log
+    from ..analysis.log_frf import frf_from_log
 
     channel, rms, how = excited_current(path, start_s, stop_s)
     res = frf_from_log(path, channel, FRF_OUTPUT, start_s, stop_s, min_coherence=MIN_COHERENCE)
@@ -219,7 +219,7 @@ def _frf(path, start_s, stop_s):
 
 
 def _hysteresis(path, start_s, stop_s):
-    from ..analysis.log_identification import hysteresis_from_log
+    from ..analysis.log_hysteresis import hysteresis_from_log
 
     h = hysteresis_from_log(path, start_s, stop_s)
     loop, ident = h.loop, h.identification
@@ -259,11 +259,11 @@ def _hysteresis(path, start_s, stop_s):
 
 
 def _log_testbed(path):
-    from ..analysis.log_identification import _testbed_info
+    from ..analysis.log_window import testbed_info
     from ..logs import LogReader
 
     with LogReader(path) as r:
-        return _testbed_info(r, None)
+        return testbed_info(r, None)
 
 
 def _testbed_table(path) -> tuple[np.ndarray, np.ndarray, str] | None:

@@ -18,13 +18,13 @@ from . import arguments
 # the analysis package's choices, repeated here so that parsing needs no numpy
 # (tests/analysis/test_analysis_log.py checks they are the same)
 METRICS = ("jitter", "energy", "psd")
-#: asked for by name only (not in the default): analysis/log_identification.py,
-#: log_step.py, log_friction_velocity.py
+#: asked for by name only (not in the default): analysis/log_step.py, log_frf.py,
+#: log_hysteresis.py, log_friction_velocity.py
 EXTRA_METRICS = ("step", "frf", "hysteresis", "friction_velocity")
 ALL_METRICS = METRICS + EXTRA_METRICS
 FRF_INPUTS = ("current_coarse", "torque_coarse_cmd", "current_fine", "torque_fine_cmd")
 FRF_OUTPUTS = ("encoder_outer", "encoder_inner", "gyro_rate", "autocollimator", "los_estimate")
-#: coherence at or above which a frequency-response bin counts (log_identification's)
+#: coherence at or above which a frequency-response bin counts (log_frf's)
 MIN_COHERENCE = 0.9
 SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
 

@@ -244,8 +244,7 @@ def test_the_log_adapter_reads_in_chunks_with_the_same_result(pass_log):
 
 def test_a_log_without_a_pass_is_a_specific_error(pass_log):
     from groundstation.analysis.log_friction_velocity import friction_velocity_from_log
-    from groundstation.analysis.log_identification import (LogIdentificationError,
-                                                           NoExcitationError)
+    from groundstation.analysis.log_window import LogIdentificationError, NoExcitationError
 
     with pytest.raises(NoExcitationError, match="no constant-velocity pass"):
         friction_velocity_from_log(pass_log, 0.0, 0.1, trim_to_profile=False)

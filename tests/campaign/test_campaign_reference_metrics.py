@@ -302,7 +302,7 @@ def test_step_rows_carry_rise_time_and_overshoot(steps):
 
 # --------------------------------------------------------------------------- frf
 def test_the_frf_rows_name_the_excited_input_and_its_coherence(sysid):
-    from groundstation.analysis.log_identification import frf_from_log
+    from groundstation.analysis.log_frf import frf_from_log
 
     rows = rows_of(sysid)
     assert [r["frf_input"] for r in rows] == ["current_coarse", "current_fine"]

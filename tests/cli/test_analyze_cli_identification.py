@@ -1,6 +1,7 @@
 """`groundstation analyze --metrics step,frf,hysteresis`: the identification figures of
-analysis/log_identification.py per log, from short logs the fast simulator records; a
-log whose figure cannot be computed gets the error in its row and exit status 1."""
+analysis/log_step.py, log_frf.py and log_hysteresis.py per log, from short logs the fast
+simulator records; a log whose figure cannot be computed gets the error in its row and
+exit status 1."""
 
 from __future__ import annotations
 
@@ -131,7 +132,7 @@ def test_a_log_without_a_step_is_a_row_with_the_error(logs, capsys):
 
 
 def test_hysteresis_of_a_triangle_writes_the_slope_table(tmp_path, capsys):
-    """A closed-loop position triangle as in test_analysis_log_identification.py; the
+    """A closed-loop position triangle as in test_analysis_log_hysteresis.py; the
     slope table's file is written (--slope-table implies --metrics hysteresis)."""
     profile = profile_from_dict({
         "profile": {"name": "friction_triangle_test", "target": "REFERENCE", "units": "rad",
@@ -158,11 +159,11 @@ def test_hysteresis_of_a_triangle_writes_the_slope_table(tmp_path, capsys):
 
 def test_the_cli_channel_choices_are_the_analysis_ones():
     from groundstation.cli import analysis as cli_analysis
-    from groundstation.analysis import log_identification as li
+    from groundstation.analysis import log_frf
 
-    assert cli_analysis.FRF_INPUTS == tuple(li.FRF_INPUTS)
-    assert cli_analysis.FRF_OUTPUTS == tuple(li.FRF_OUTPUTS)
-    assert cli_analysis.MIN_COHERENCE == li.DEFAULT_MIN_COHERENCE
+    assert cli_analysis.FRF_INPUTS == tuple(log_frf.FRF_INPUTS)
+    assert cli_analysis.FRF_OUTPUTS == tuple(log_frf.FRF_OUTPUTS)
+    assert cli_analysis.MIN_COHERENCE == log_frf.DEFAULT_MIN_COHERENCE
 
 
 def test_reference_transitions_group_a_shaped_step_and_split_separate_ones():

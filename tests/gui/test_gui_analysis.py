@@ -15,7 +15,7 @@ from PySide6.QtCore import Qt
 
 from groundstation import Testbed
 from groundstation.analysis import analyze_log
-from groundstation.analysis.log_identification import frf_from_log
+from groundstation.analysis.log_frf import frf_from_log
 from groundstation.core.errors import GroundStationError
 from groundstation.gui.analysis.tables import METRIC_COLUMNS, VALUE_ROLE
 from groundstation.logs import LogReader

@@ -175,8 +175,8 @@ def test_cancel_a_metrics_batch_no_stale_result_and_the_next_run_works(qtbot, pa
 def test_cancel_an_frf_in_flight_and_start_another_at_once(qtbot, panel, logs, monkeypatch):
     """An FRF cannot stop inside a log: cancelled while one computes, a new FRF starts
     at once, and only the new one's curves are drawn - the old one's never are."""
-    from groundstation.analysis import log_identification as ident
-    real = ident.frf_from_log
+    from groundstation.analysis import log_frf
+    real = log_frf.frf_from_log
     reached, gate = threading.Event(), threading.Event()
 
     def held(path, **options):
@@ -185,7 +185,7 @@ def test_cancel_an_frf_in_flight_and_start_another_at_once(qtbot, panel, logs, m
             gate.wait(WAIT_MS / 1000)
         return real(path, **options)
 
-    monkeypatch.setattr(ident, "frf_from_log", held)
+    monkeypatch.setattr(log_frf, "frf_from_log", held)
     tick_only(panel, logs["sysid"])
     delivered = []
     panel.jobs.sig_frf_done.connect(delivered.append)

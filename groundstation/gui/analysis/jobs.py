@@ -35,7 +35,7 @@ from typing import Any, Callable
 import numpy as np
 from PySide6.QtCore import QObject, Signal
 
-from ...analysis import log_identification as ident
+from ...analysis import log_frf, log_hysteresis, log_window
 from ...analysis.log_metrics import analyze_log
 from ...analysis.log_step import LogStep, step_from_log
 from ...core.errors import GroundStationError
@@ -92,8 +92,8 @@ def step_trace(path: Path, step: LogStep, start_s: float | None,
     """The reference and the response (reference - error_angle, as step_from_log takes it)
     over the same window, the time counted from the step."""
     with LogReader(path) as r:
-        i0, i1 = r.index_range(ident.PACKET, start_s, stop_s, relative=True)
-        d = r.read_rows(ident.PACKET, ["reference", "error_angle"], i0, i1)
+        i0, i1 = r.index_range(log_window.PACKET, start_s, stop_s, relative=True)
+        d = r.read_rows(log_window.PACKET, ["reference", "error_angle"], i0, i1)
         origin = r.origin("device")
     ref = np.asarray(d["reference"], dtype=np.float64)
     t = np.asarray(d["device_time"], dtype=np.float64) - origin - step.step_time_s
@@ -116,8 +116,8 @@ class _Job:
 class AnalysisJobs(QObject):
     sig_progress = Signal(str, int, int, str)  # job, logs done, logs in all, what now ("a.h5 40 %")
     sig_metrics_done = Signal(object)         # Batch of LogMetrics
-    sig_frf_done = Signal(object)             # Batch of log_identification.LogFrf
-    sig_hysteresis_done = Signal(object)      # Batch of log_identification.LogHysteresis
+    sig_frf_done = Signal(object)             # Batch of log_frf.LogFrf
+    sig_hysteresis_done = Signal(object)      # Batch of log_hysteresis.LogHysteresis
     sig_step_done = Signal(object)            # Batch of StepResult
     sig_logs_found = Signal(str, object)      # folder, list[Path] of its logs
     sig_failed = Signal(str, str)             # job, why (the error's own message)
@@ -186,13 +186,13 @@ class AnalysisJobs(QObject):
         return self._batch("metrics", paths, compute)
 
     def frf(self, paths: list[Path], **options) -> bool:
-        """log_identification.frf_from_log of each path (options: its keyword arguments)."""
-        return self._batch("frf", paths, lambda job, p, i, n: ident.frf_from_log(p, **options))
+        """log_frf.frf_from_log of each path (options: its keyword arguments)."""
+        return self._batch("frf", paths, lambda job, p, i, n: log_frf.frf_from_log(p, **options))
 
     def hysteresis(self, paths: list[Path], **options) -> bool:
-        """log_identification.hysteresis_from_log of each path (options: its keyword arguments)."""
+        """log_hysteresis.hysteresis_from_log of each path (options: its keyword arguments)."""
         return self._batch("hysteresis", paths,
-                           lambda job, p, i, n: ident.hysteresis_from_log(p, **options))
+                           lambda job, p, i, n: log_hysteresis.hysteresis_from_log(p, **options))
 
     def step(self, paths: list[Path], start_s: float | None = None,
              stop_s: float | None = None) -> bool:
@@ -207,7 +207,7 @@ class AnalysisJobs(QObject):
         """The logs in a folder and below (a campaign's), as sig_logs_found."""
         def work(job: _Job):
             try:
-                found = ident.find_logs(folder)
+                found = log_window.find_logs(folder)
             except GroundStationError as exc:
                 return "sig_failed", ("folder", str(exc))
             return "sig_logs_found", (str(folder), found)

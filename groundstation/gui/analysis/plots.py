@@ -179,7 +179,7 @@ class FrfPlots(QWidget):
         self.caption.setToolTip("")
 
     def show_frfs(self, results, order=()) -> None:
-        """log_identification.LogFrf of one or more logs (`order`: colour indices)."""
+        """log_frf.LogFrf of one or more logs (`order`: colour indices)."""
         self.clear()
         if not results:
             return
@@ -285,7 +285,7 @@ class HysteresisPlot(QWidget):
         self.caption.setText("")
 
     def show_loops(self, results, order=()) -> None:
-        """log_identification.LogHysteresis of one or more logs (`order`: colour indices)."""
+        """log_hysteresis.LogHysteresis of one or more logs (`order`: colour indices)."""
         self.clear()
         for i, res in zip(_indices(results, order), results):
             self._one(res, i)

@@ -1,6 +1,8 @@
-"""analysis/log_identification.py: a frequency response and a hysteresis loop from logs
-the fast simulator records, checked against the testbed model; the errors name what is
-missing."""
+"""analysis/log_frf.py: a frequency response from a log the fast simulator records,
+checked against the testbed model; and on the same log what log_window.py gives it and
+the hysteresis adapter alike: the log's testbed, the window, errors that name what is
+missing, the logs of a folder.  The hysteresis loop of a triangle is in
+test_analysis_log_hysteresis.py."""
 
 from __future__ import annotations
 
@@ -13,18 +15,17 @@ import pytest
 
 from groundstation import Testbed
 from groundstation.analysis.frf import compare_frf
-from groundstation.analysis.log_identification import (LogIdentificationError,
-                                                       MissingChannelError, NoExcitationError,
-                                                       WindowTooShortError, find_logs,
-                                                       frf_from_log, hysteresis_from_log)
+from groundstation.analysis.log_frf import FRF_INPUTS, FRF_OUTPUTS, frf_from_log
+from groundstation.analysis.log_hysteresis import hysteresis_from_log
+from groundstation.analysis.log_window import (SIGNAL_CHANNELS, LogIdentificationError,
+                                               MissingChannelError, NoExcitationError,
+                                               WindowTooShortError, find_logs)
 from groundstation.core.errors import GroundStationError
 from groundstation.logs import LogReader
 from groundstation.plant.testbed import PROFILES_DIR, load_testbed
-from groundstation.profiles.profile import profile_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 NOISE_PROFILE = ROOT / "profiles/waveforms/sysid_coarse_noise_1A.toml"   # 1 A RMS, 5-300 Hz
-DESIGN = ROOT / "profiles/controllers/relative_design2.toml"
 EXCITED_BAND_HZ = (10.0, 300.0)
 
 
@@ -50,25 +51,6 @@ def sysid(tmp_path_factory):
         tb.play(NOISE_PROFILE, max_seconds=6.0)
         tb.stop_recording()
     return path, testbed
-
-
-@pytest.fixture(scope="module")
-def triangle(tmp_path_factory):
-    """A closed-loop position triangle, +-0.05 deg at 0.01 deg/s, two cycles: the bearing
-    runs through full hysteresis loops (40 s of device time)."""
-    folder = tmp_path_factory.mktemp("triangle")
-    profile = profile_from_dict({
-        "profile": {"name": "friction_triangle_test", "target": "REFERENCE", "units": "rad",
-                    "origin": "relative"},
-        "generator": {"type": "triangle", "amplitude_deg": 0.05, "velocity_deg_per_s": 0.01,
-                      "cycles": 2, "turnaround_s": 0.5}})
-    with Testbed("sim", testbed=ROOT / "profiles/testbeds/relative_2dof.toml", fast=True,
-                 generator=None, log_folder=folder, history=folder / "h") as tb:
-        tb.upload_design(DESIGN)
-        path = tb.start_recording("triangle")
-        tb.play(profile)
-        tb.stop_recording()
-    return path
 
 
 def test_frf_of_open_loop_noise_matches_the_model_where_coherent(sysid):
@@ -144,27 +126,6 @@ def test_a_moved_testbed_file_leaves_the_measurement_without_a_model(sysid):
         away.rename(testbed)
 
 
-def test_hysteresis_loop_and_slope_table_from_a_triangle(triangle):
-    res = hysteresis_from_log(triangle)
-    tb = load_testbed(ROOT / "profiles/testbeds/relative_2dof.toml")
-    assert res.torque_formula == "K_t1*i1 - K_t2*i2 + k*(phi2 - phi1)"
-    assert res.torque_constant_in_oz_per_a == tb.motor_coarse["torque_constant"]
-    assert sum(b.complete for b in res.loop.branches) >= 3
-    ident = res.identification
-    assert ident is not None and ident.coulomb_torque_estimated
-    # T_c read off the loop: the testbed's within 10 % (at 10x the reference's speed)
-    assert ident.coulomb_torque_in_oz == pytest.approx(tb.friction["coulomb_torque"], rel=0.1)
-    # the shipped slope table starts at f(0) = 12; the estimate is within 20 %
-    assert ident.f[0] == pytest.approx(12.0, rel=0.2)
-    # the fine loop holds the inner axis on the flexure: what it passes to the outer axis
-    # (fine-motor reaction and flexure torque, together J2 * w2') is a few hundredths of
-    # an in-oz here, a few % of T_c at most - small, not nothing
-    plain = hysteresis_from_log(triangle, coupling=False)
-    assert plain.torque_formula == "K_t1*i1"
-    difference = np.abs(plain.loop.torque_in_oz - res.loop.torque_in_oz)
-    assert 0.0 < np.max(difference) < 0.05 * tb.friction["coulomb_torque"]
-
-
 def test_missing_channel_is_named(sysid, tmp_path):
     path, _ = sysid
     broken = Path(shutil.copy(path, tmp_path / "no_current.h5"))
@@ -213,3 +174,8 @@ def test_find_logs_lists_a_folder(sysid, tmp_path):
     assert find_logs(tmp_path / "run") == [tmp_path / "run" / "b.h5", tmp_path / "run" / "sub" / "a.h5"]
     with pytest.raises(GroundStationError, match="not a folder"):
         find_logs(tmp_path / "nowhere")
+
+
+def test_a_missing_channel_message_lists_the_frf_channels_the_log_has():
+    """log_window names them for every adapter; they are the frequency response's."""
+    assert SIGNAL_CHANNELS == (*FRF_INPUTS, *FRF_OUTPUTS)
