@@ -106,7 +106,7 @@ LAYERS = [
     ("link", "plant", "live", "instruments", "profiles", "firmware_kit"),
     ("logs", "params"),                                   # the recorder reads the link's blocks
     ("sim", "analysis", "fanout"),                        # the twin, the metrics, the consoles
-    ("basemotion",),                                      # generator profiles, fitted with analysis
+    ("basemotion", "identification"),                     # generator profiles; the rig's own twin
     ("station",),                                         # one session: rig, clock, recording
     ("campaign",),
     ("gui",),

@@ -297,7 +297,10 @@ def _informed(base: Testbed, bins: _Bins, model: ResponseModel,
 def _solve(problem: _Problem) -> tuple[np.ndarray, np.ndarray, float, bool, str]:
     """(x, covariance, reduced chi-square, converged, message)."""
     lo, hi = problem.bounds()
-    x0 = np.clip(np.zeros(len(problem.free)), lo, hi)
+    # strictly inside the bounds: started on one (a friction stiffness of zero), the
+    # trust region takes no step and the solver stops where it began
+    margin = 1e-3 * (hi - lo)
+    x0 = np.clip(np.zeros(len(problem.free)), lo + margin, hi - margin)
     sol = least_squares(problem.residuals, x0, bounds=(lo, hi), x_scale="jac", method="trf",
                         max_nfev=200 * (len(problem.free) + 1))
     dof = max(sol.fun.size - len(problem.free), 1)

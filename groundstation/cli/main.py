@@ -32,6 +32,7 @@ from ..core.contracts import DeviceLink
 from . import analysis as cli_analysis
 from . import campaign as cli_campaign
 from . import fg as cli_fg
+from . import identify as cli_identify
 from . import logs as cli_logs
 from . import params as cli_params
 from . import profile as cli_profile
@@ -330,6 +331,7 @@ def build_parser() -> argparse.ArgumentParser:
     cli_campaign.add_parsers(sub)
     cli_fg.add_parsers(sub)
     cli_analysis.add_parsers(sub)
+    cli_identify.add_parsers(sub)
     return p
 
 

@@ -1,0 +1,176 @@
+"""From identification logs to the identified parameters: which logs serve, their
+frequency responses, the plant fit, and what of it goes into the testbed file.
+
+A log serves the plant fit when it is an open-loop random excitation of one motor
+(reference §7: `open_loop_sysid`) large enough for the bearing to slide: at the small
+level (0.02 A) the bearing sticks and its presliding friction is a stiff spring the
+linear plant leaves out, so such a log is listed and not used.  From each log that
+serves, the responses from the excited motor's current to both encoders (and the gyro
+on the inertial rig) are estimated (analysis.log_frf) and fitted together
+(analysis.plant_fit).
+
+The bearing's viscous coefficient b_f is fitted, but not written: under random
+excitation the Coulomb friction acts as an extra damping of about the same kind, so the
+fitted b_f is an effective damping at that excitation level (on the twin, about 10 %
+above the true b_f at 1 A), not the b_f of the friction model.  It is reported as that;
+the steady-state friction sweep is what measures b_f.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..analysis.log_frf import frf_from_log
+from ..analysis.log_window import LogIdentificationError
+from ..analysis.plant_fit import (FRICTION_STIFFNESS, MeasuredResponse, ParameterEstimate,
+                                  PlantFit, fit_plant)
+from ..core.errors import GroundStationError
+from ..logs.reader import LogReader
+from ..plant.testbed import Testbed, load_testbed
+from .testbed_file import Provenance
+
+#: below this RMS current (A) the bearing sticks: the log does not serve the plant fit
+MIN_CURRENT_RMS_A = 0.1
+#: the band fitted by default: above the low band where friction shapes the response
+#: most, below the band edge of the shipped excitation (5-300 Hz)
+DEFAULT_BAND_HZ = (15.0, 300.0)
+#: fitted, reported, not written (see the module docstring)
+EFFECTIVE_ONLY = ("mechanics.bearing_viscous", FRICTION_STIFFNESS.name)
+INPUTS = ("current_coarse", "current_fine")
+
+
+class IdentificationError(GroundStationError):
+    """The logs cannot identify the rig (the message says which log and why)."""
+
+
+@dataclass(frozen=True)
+class LogUse:
+    """What one log was used for."""
+    path: Path
+    used: bool
+    input_channel: str               # the excited motor's current ('' if none)
+    current_rms_a: float
+    note: str = ""
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    base: Testbed
+    fit: PlantFit
+    logs: tuple[LogUse, ...]
+    responses: tuple             # analysis.log_frf.LogFrf of every response fitted
+    written: dict[str, float]    # what goes into the testbed file
+    provenance: tuple[Provenance, ...]
+    notes: tuple[str, ...]
+
+
+def _testbed_kind(text: str) -> tuple[str, str]:
+    import tomllib
+    try:
+        t = tomllib.loads(text).get("testbed", {})
+    except tomllib.TOMLDecodeError:
+        return "", ""
+    return str(t.get("configuration", "")), str(t.get("setup", ""))
+
+
+def _examine(path: Path, base: Testbed) -> LogUse:
+    """Which motor the log excites, and whether it serves; IdentificationError for a log
+    of another kind of testbed."""
+    try:
+        with LogReader(path) as r:
+            _, _, text = r.testbed()
+            data = r.read("HIGH_RATE", list(INPUTS))
+    except GroundStationError as exc:
+        raise IdentificationError(f"{path.name}: cannot be read ({exc})") from None
+    kind = _testbed_kind(text) if text else ("", "")
+    if text and kind != (base.configuration, str(base.setup)):
+        raise IdentificationError(
+            f"{path.name} was recorded on a {kind[0]} {kind[1]} testbed, the base file "
+            f"{base.path.name} is {base.configuration} {base.setup}: identify each rig from "
+            f"its own logs, starting from a base file of its kind")
+    rms = {c: float(np.sqrt(np.nanmean(np.square(np.asarray(data[c], dtype=float)))))
+           if len(data[c]) else 0.0 for c in INPUTS}
+    channel = max(INPUTS, key=lambda c: rms[c])
+    if not rms[channel] > 0.0:
+        return LogUse(path, False, "", 0.0, "no motor current: not an identification log")
+    if rms[channel] < MIN_CURRENT_RMS_A:
+        return LogUse(path, False, channel, rms[channel],
+                      f"{rms[channel]:.3g} A RMS: the bearing sticks at this level (presliding "
+                      f"friction), which the linear plant leaves out; not used")
+    return LogUse(path, True, channel, rms[channel])
+
+
+def _responses(use: LogUse, base: Testbed) -> list:
+    outputs = ["encoder_outer", "encoder_inner"] + (["gyro_rate"] if base.inertial else [])
+    out = []
+    for output in outputs:
+        try:
+            out.append(frf_from_log(use.path, use.input_channel, output, testbed=base))
+        except LogIdentificationError as exc:
+            raise IdentificationError(f"{use.path.name}: {use.input_channel} -> {output}: "
+                                      f"{exc}") from None
+    return out
+
+
+def _provenance(p: ParameterEstimate) -> Provenance:
+    return Provenance(p.name, p.units, p.base, p.value, p.ci95, p.status, p.reason, p.sources)
+
+
+def _written(fit: PlantFit) -> tuple[dict[str, float], list[Provenance], list[str]]:
+    written, provenance, notes = {}, [], []
+    for p in fit.parameters:
+        if p.name in EFFECTIVE_ONLY and p.status == "identified":
+            what = ("the bearing's effective damping at this excitation (viscous b_f plus "
+                    "the Coulomb friction's equivalent)" if p.name == "mechanics.bearing_viscous"
+                    else "the bearing friction's linearised stiffness at this excitation")
+            notes.append(f"{p.name}: {p.value:.4g} {p.units} fitted as {what}; not written "
+                         f"(the base value stays)")
+            provenance.append(Provenance(p.name, p.units, p.base, p.base, None,
+                                         "held (friction)", f"fitted {p.value:.4g} {p.units}: "
+                                         f"{what}", p.sources))
+            continue
+        if p.name == FRICTION_STIFFNESS.name:
+            continue                                  # not a parameter of the file
+        if p.status == "identified":
+            written[p.name] = p.value
+        provenance.append(_provenance(p))
+    return written, provenance, notes
+
+
+def identify(paths: Sequence[str | Path], base_path: str | Path, *,
+             band_hz: tuple[float, float] = DEFAULT_BAND_HZ,
+             min_coherence: float = 0.9) -> Identification:
+    """Identify the plant of the rig that recorded `paths`, starting from `base_path`."""
+    base = load_testbed(base_path)
+    if not paths:
+        raise IdentificationError("no logs given: record the open_loop_sysid campaign on "
+                                  "the rig and give its logs (or its report.json)")
+    uses = [_examine(Path(p), base) for p in paths]
+    serving = [u for u in uses if u.used]
+    if not serving:
+        raise IdentificationError(
+            "none of the logs is an open-loop random excitation of at least "
+            f"{MIN_CURRENT_RMS_A:g} A RMS: " + "; ".join(f"{u.path.name}: {u.note}" for u in uses))
+    responses = [lf for u in serving for lf in _responses(u, base)]
+    measured = [MeasuredResponse(lf.model_path, lf.measured.freq_hz, lf.measured.response,
+                                 lf.measured.coherence, lf.measured.segments, lf.path.name)
+                for lf in responses]
+    rates = {round(lf.measured.rate_hz, 6) for lf in responses}
+    if len(rates) != 1:
+        raise IdentificationError(f"the logs were sampled at different rates {sorted(rates)}")
+    try:
+        fit = fit_plant(base, measured, sample_rate_hz=rates.pop(), band_hz=band_hz,
+                        min_coherence=min_coherence)
+    except GroundStationError as exc:
+        raise IdentificationError(f"the plant fit failed: {exc}") from None
+    written, provenance, notes = _written(fit)
+    notes += [m for m in fit.messages]
+    if not math.isfinite(fit.reduced_chi_square):
+        raise IdentificationError("the plant fit gave no finite misfit")
+    return Identification(base, fit, tuple(uses), tuple(responses), written,
+                          tuple(provenance), tuple(notes))
