@@ -213,6 +213,16 @@ def test_only_the_rig_module_builds_a_simulator_a_link_or_a_generator():
 WIDGET_MODULES = ("PySide6.QtWidgets", "pyqtgraph")
 
 
+def absolute_imports(node: ast.AST) -> list[str]:
+    """The modules an import statement names (`from a import b` names a and a.b);
+    relative imports are the project's own and name nothing here."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+        return [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+    return []
+
+
 def test_the_window_session_imports_no_widgets():
     """gui/session/ is the window's model (links, recording, playback, campaigns as
     QObjects and their signals): it imports QtCore at most, never QtWidgets or
@@ -220,13 +230,8 @@ def test_the_window_session_imports_no_widgets():
     offenders = []
     for path in sorted((PKG / "gui" / "session").rglob("*.py")):
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Import):
-                names = [a.name for a in node.names]
-            elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
-                names = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
-            else:
-                continue
-            offenders += [f"{path.relative_to(PKG).as_posix()}:{node.lineno}: {n}" for n in names
+            offenders += [f"{path.relative_to(PKG).as_posix()}:{node.lineno}: {n}"
+                          for n in absolute_imports(node)
                           if any(n == m or n.startswith(m + ".") for m in WIDGET_MODULES)]
     assert not offenders, offenders
 
@@ -244,13 +249,7 @@ NUMERIC_CALLS = {"cumsum", "cumprod", "trapz", "trapezoid", "convolve", "correla
 def numerics_in(path: Path, name: str) -> list[str]:
     found = []
     for node in ast.walk(ast.parse(path.read_text())):
-        if isinstance(node, ast.Import):
-            modules = [a.name for a in node.names]
-        elif isinstance(node, ast.ImportFrom) and node.module and not node.level:
-            modules = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
-        else:
-            modules = []
-        found += [f"{name}:{node.lineno}: imports {m}" for m in modules
+        found += [f"{name}:{node.lineno}: imports {m}" for m in absolute_imports(node)
                   if any(m == n or m.startswith(n + ".") for n in NUMERIC_MODULES)]
         if (isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute)
                 and isinstance(node.func.value, ast.Name) and node.func.value.id in ("np", "numpy")
