@@ -232,11 +232,17 @@ def _add_analyze(actions) -> None:
                    help="length of the time responses, s (default 0.5)")
     s.add_argument("--no-gyro", action="store_true",
                    help="inertial designs: leave the gyro's dynamics and delay out of G")
+    s.add_argument("--testbed", default=None, metavar="RIG.toml",
+                   help="also analyse each design on this testbed (e.g. one written by "
+                        "`groundstation identify`), beside the testbed its file names")
     s.set_defaults(func=_cmd_analyze)
 
 
 def _cmd_analyze(args) -> int:
+    from dataclasses import replace
+
     from ..params.design_file import load_design
+    from ..plant.testbed import load_testbed
     from ..params.pq_report import summarize, summary_lines
     from ..params.pq_response import DisturbanceError, parse_disturbance
 
@@ -253,13 +259,21 @@ def _cmd_analyze(args) -> int:
         disturbance = parse_disturbance(args.disturbance) if args.disturbance else None
     except DisturbanceError as exc:
         return fail(f"--disturbance: {exc}", EXIT_UNREADABLE)
+    try:
+        rig = load_testbed(args.testbed) if args.testbed else None
+    except GroundStationError as exc:
+        return fail(f"--testbed: {exc}", EXIT_UNREADABLE)
     summaries = []
     for path in [args.file] + ([args.against] if args.against else []):
         try:
             design = load_design(path)
-            summaries.append(summarize(design, freqs, disturbance, args.step_mrad * 1e-3,
-                                       args.duration, sensor=not args.no_gyro,
-                                       dictionary=load_dictionary_for(args)))
+            # the same controller on the rig's own plant, named so in the report
+            on_rig = [] if rig is None else [replace(design, testbed=rig,
+                                                     name=f"{design.name} on {rig.name}")]
+            for d in [design] + on_rig:
+                summaries.append(summarize(d, freqs, disturbance, args.step_mrad * 1e-3,
+                                           args.duration, sensor=not args.no_gyro,
+                                           dictionary=load_dictionary_for(args)))
         except GroundStationError as exc:
             text = str(exc)
             return fail(text if text.startswith(str(path)) else f"{path}: {text}", EXIT_UNREADABLE)

@@ -113,8 +113,13 @@ def identified_text(base: Testbed, values: dict[str, float], provenance: Sequenc
     """The text of the identified file that will live at `out`."""
     folder = Path(out).resolve().parent
     texts = {k: toml_number(v, TestbedWriteError) for k, v in values.items()}
-    comments = {k: f"# identified (base {toml_number(float(getattr(base, k.split('.')[0])[k.split('.')[1]]))})"
-                for k in values}
+    comments = {}
+    for k in values:
+        section, key = k.split(".", 1)
+        section_values = getattr(base, section, None)
+        was = section_values.get(key) if isinstance(section_values, dict) else None
+        if isinstance(was, (int, float)):
+            comments[k] = f"# identified (base {toml_number(float(was))})"
     texts["testbed.name"] = toml_string(name)
     if base.friction.get("slope_table"):
         texts["friction.slope_table"] = toml_string(relative_path(base.slope_table_path, folder))
