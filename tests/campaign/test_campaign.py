@@ -130,7 +130,7 @@ name = "inject"
 testbed = "{ROOT / 'profiles/testbeds/inertial_2dof.toml'}"
 
 [matrix]
-design = ["{ROOT / 'profiles/controllers/relative_design2.toml'}",
+design = ["{ROOT / 'profiles/controllers/recentre_inertial.toml'}",
           "{ROOT / 'profiles/controllers/inertial_design1.toml'}"]
 
 [[run]]
@@ -191,7 +191,7 @@ def test_a_failure_mid_campaign_leaves_the_rig_safe_and_resume_continues(tmp_pat
 
 def test_resume_finishes_an_aborted_campaign(tmp_path):
     path = failing_campaign(tmp_path)
-    text = path.read_text().replace("inertial_design1.toml", "relative_design1.toml")
+    text = path.read_text().replace("inertial_design1.toml", "recentre_inertial.toml")
     path.write_text(text)
     answers = iter([True, False, True])                   # run 1 ok, abort in run 2, then ok
     report, _, _ = run_campaign(path, tmp_path, operator=lambda prompt: next(answers))

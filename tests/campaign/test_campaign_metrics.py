@@ -286,7 +286,8 @@ name = "fail"
 testbed = "{INERTIAL}"
 
 [matrix]
-design = ["{DESIGN2}", "{ROOT / 'profiles/controllers/inertial_design1.toml'}"]
+design = ["{ROOT / 'profiles/controllers/recentre_inertial.toml'}",
+          "{ROOT / 'profiles/controllers/inertial_design1.toml'}"]
 
 [[run]]
 action = "start_recording"
@@ -309,7 +310,7 @@ action = "stop_recording"
         report = CampaignRunner(c, tb).run()
     assert report.status == "failed" and report.failed_run == 2
     assert [(r["run"], r["variables"]["design_stem"]) for r in report.recordings] == \
-        [(1, "relative_design2"), (2, "inertial_design1")]
+        [(1, "recentre_inertial"), (2, "inertial_design1")]
     assert report.recordings[1].get("stop_reason")                 # closed by make_safe
     metrics = campaign_metrics(report, c)
     assert [r["run_status"].split(":")[0] for r in metrics.rows] == ["completed", "failed"]

@@ -36,7 +36,7 @@ name = "fails"
 testbed = "{PROFILES / 'testbeds/inertial_2dof.toml'}"
 
 [matrix]
-design = ["{PROFILES / 'controllers/relative_design2.toml'}",
+design = ["{PROFILES / 'controllers/recentre_inertial.toml'}",
           "{PROFILES / 'controllers/inertial_design1.toml'}"]
 
 [[run]]

@@ -113,3 +113,62 @@ def test_logs_of_another_kind_of_rig_are_refused(rig, capsys):
     err = capsys.readouterr().err
     assert status == 1 and "identify each rig from its own logs" in err
     assert "nothing written" in err and not out.exists()
+
+
+#: a short campaign: a shipped design holding the line of sight for a second
+HOLD = """
+[campaign]
+name = "hold"
+description = "A shipped design holds the LOS for a second on the identified rig"
+testbed = "{testbed}"
+
+[[setup]]
+action = "connect"
+
+[[run]]
+action = "start_recording"
+name = "hold"
+
+[[run]]
+action = "upload_design"
+design = "{design}"
+accept_risk = "the thesis design, marginal on this rig: a one-second hold in a test"
+
+[[run]]
+action = "set_mode"
+mode = "{mode}"
+
+[[run]]
+action = "arm"
+
+[[run]]
+action = "dwell"
+seconds = 1.0
+
+[[run]]
+action = "stop_recording"
+"""
+DESIGNS = {"relative": ("relative_design2.toml", "RELATIVE"),
+           "inertial": ("inertial_design1.toml", "INERTIAL")}
+
+
+def test_a_campaign_runs_on_the_identified_rig(rig, capsys, monkeypatch):
+    """A shipped design, judged by the upload gate on the identified plant (both are
+    marginal there: the relative design's gain margin falls to 4.6 dB, the inertial
+    one's phase margin is 14 deg) and sent with the risk accepted, holds the LOS."""
+    out = rig["folder"] / "campaign_rig.toml"
+    assert main(["identify", *map(str, rig["logs"]), "--testbed", str(rig["base"]),
+                 "--out", str(out)]) == 0
+    design, mode = DESIGNS[rig["base"].name.split("_")[0]]
+    campaign = rig["folder"] / "hold.toml"
+    campaign.write_text(HOLD.format(testbed=rig["base"].as_posix(), mode=mode,
+                                    design=(ROOT / "profiles/controllers" / design).as_posix()))
+    monkeypatch.chdir(rig["folder"])
+    status = main(["campaign", "run", str(campaign), "--device", "sim", "--fast",
+                   "--testbed", str(out), "--no-analysis", "--generator", "none"])
+    text = capsys.readouterr().out
+    assert status == 0, text
+    assert "COMPLETED - 7 step(s) done, 1 run(s) complete" in text
+    # the upload gate judged the design on the identified plant, not the one it names
+    assert f"{design}: validated on this session's testbed campaign_rig.toml" in text
+    assert "margins accepted" in text

@@ -41,7 +41,10 @@ def test_verbs_refuse_what_they_cannot_do(tmp_path):
         assert tb.generator is None                           # a relative rig has no stage
         with pytest.raises(ScriptError, match="no function generator"):
             tb.generator_set(1, waveform="SINE", frequency_hz=1.0, amplitude_vpp=0.1)
-        with pytest.raises(ScriptError, match="refused by validation"):
+        # a design for another kind of rig is refused before its table is even built
+        with pytest.raises(ScriptError, match="inertial_design2.toml is a design for a 2dof "
+                                              "inertial testbed; this session runs "
+                                              "relative_2dof.toml"):
             tb.upload_design(ROOT / "profiles/controllers/inertial_design2.toml")
         with pytest.raises(ScriptError, match="no operator"):
             tb.pause("look at the rig")
