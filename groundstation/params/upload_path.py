@@ -20,7 +20,7 @@ a failed transfer raises the loader's UploadError.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Callable, Mapping
 
@@ -65,6 +65,26 @@ def source_of(design: ControllerDesign | str | Path) -> str:
     return str(design)
 
 
+def judged_on(design: ControllerDesign, testbed,
+              warn: Callable[[str], None] | None = None) -> ControllerDesign:
+    """The design as the gate must judge it: on the plant the session drives.  A design
+    names the testbed it was made for; on another file of the same kind (an identified
+    rig, the appendix's inertias) it is judged on that one, and `warn` is told; a
+    design for another kind of rig is refused (ValidationRefused).  `testbed` None (the
+    session was given none): the design's own is all there is."""
+    own = design.testbed
+    if testbed is None or own.text == testbed.text:
+        return design
+    if (own.configuration, own.setup) != (testbed.configuration, testbed.setup):
+        raise ValidationRefused(f"{design.path.name} is a design for a {own.configuration} "
+                                f"{own.setup} testbed; this session runs {testbed.path.name}, "
+                                f"a {testbed.configuration} {testbed.setup} one")
+    if warn is not None:
+        warn(f"{design.path.name}: validated on this session's testbed {testbed.path.name} "
+             f"(the design names {own.path.name})")
+    return replace(design, testbed=testbed)
+
+
 def prepare(design: ControllerDesign | str | Path, dictionary: Dictionary,
             base: Mapping[str, Any] | None = None) -> PreparedTable:
     """The design's table over `base` (a device's table; the defaults without one) and
@@ -79,10 +99,12 @@ def upload_design(loader: ParameterLoader, design: ControllerDesign | str | Path
                   source: str | None = None, accept_risk: str | None = None,
                   progress: Progress | None = None,
                   on_report: Callable[[ValidationReport], None] | None = None,
-                  warn: Callable[[str], None] | None = None) -> UploadOutcome:
+                  warn: Callable[[str], None] | None = None,
+                  testbed=None) -> UploadOutcome:
     """Build the design's table over the device's active one and upload it through the
-    gate (see upload_table).  `source` names it in the history (default: the file)."""
-    d = design_of(design)
+    gate (see upload_table).  `source` names it in the history (default: the file);
+    `testbed`, the session's testbed when one was chosen (see judged_on)."""
+    d = judged_on(design_of(design), testbed, warn)
     active = loader.read_active()
     values = table_values(d, base=active.values, dictionary=loader.d)
     return upload_table(loader, values, source or source_of(design), design=d,

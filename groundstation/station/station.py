@@ -363,32 +363,13 @@ class Station:
         gives the reason an engineer accepts it (recorded in the history and the log);
         the device still applies its own checks.  `on_report` receives the validation's
         report before anything is sent.  Returns the UploadRecord."""
-        from ..params.upload_path import design_of, source_of, upload_design
+        from ..params.upload_path import source_of, upload_design
 
         self._check_running()
-        design = self._on_this_testbed(design_of(path))
+        chosen = self.testbed if self.testbed_path is not None else None
         return self._uploaded(source_of(path), lambda loader: upload_design(
-            loader, design, source=source_of(path), accept_risk=accept_risk,
-            progress=progress, on_report=on_report, warn=self.echo))
-
-    def _on_this_testbed(self, design):
-        """The design as the gate must judge it: on the plant this session drives.  A
-        design names the testbed it was made for; in a session given another file of the
-        same kind (an identified rig, the appendix's inertias), it is validated on that
-        one and the operator is told; a design for another kind of rig is refused.  A
-        session given no testbed file judges the design on its own."""
-        from dataclasses import replace
-
-        own = design.testbed
-        if self.testbed_path is None or own.text == self.testbed.text:
-            return design                 # no testbed chosen: the design's is all we know
-        if (own.configuration, own.setup) != (self.testbed.configuration, self.testbed.setup):
-            raise ScriptError(f"{design.path.name} is a design for a {own.configuration} "
-                              f"{own.setup} testbed; this session runs {self.testbed.path.name}, "
-                              f"a {self.testbed.configuration} {self.testbed.setup} one")
-        self.echo(f"{design.path.name}: validated on this session's testbed "
-                  f"{self.testbed.path.name} (the design names {own.path.name})")
-        return replace(design, testbed=self.testbed)
+            loader, path, accept_risk=accept_risk, progress=progress, on_report=on_report,
+            warn=self.echo, testbed=chosen))
 
     def upload_table(self, values: Mapping[str, Any], source: str, *, design=None,
                      accept_risk: str | None = None,

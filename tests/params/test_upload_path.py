@@ -98,3 +98,31 @@ def test_an_override_is_warned_before_sending_and_written_into_the_source(dictio
     edited = upload_table(loader, values, "edited by hand", accept_risk="bench check")
     assert edited.report is None and not edited.record.validated
     assert edited.source == "edited by hand (not validated; accepted: bench check)"
+
+
+def test_a_design_is_judged_on_the_session_testbed_of_its_kind():
+    """judged_on: the design's own testbed when the session chose none or the same file;
+    another file of the same kind replaces it (and the operator is told); a design for
+    another kind of rig is refused."""
+    from dataclasses import replace as _replace
+
+    from groundstation.params.clearance import ValidationRefused
+    from groundstation.params.design_file import load_design
+    from groundstation.params.upload_path import judged_on
+    from groundstation.plant.testbed import load_testbed
+
+    root = Path(__file__).resolve().parents[2]
+    design = load_design(root / "profiles/controllers/relative_design2.toml")
+    said = []
+    assert judged_on(design, None, said.append) is design
+    assert judged_on(design, design.testbed, said.append) is design and said == []
+    softer = _replace(design.testbed, text=design.testbed.text + "\n# another rig\n",
+                      mechanics={**design.testbed.mechanics, "flexure_stiffness": 20000.0})
+    judged = judged_on(design, softer, said.append)
+    assert judged.testbed is softer and judged.c0 is design.c0
+    assert said == [f"relative_design2.toml: validated on this session's testbed "
+                    f"{softer.path.name} (the design names relative_2dof.toml)"]
+    with pytest.raises(ValidationRefused, match="relative_design2.toml is a design for a 2dof "
+                                                "relative testbed; this session runs "
+                                                "inertial_2dof.toml"):
+        judged_on(design, load_testbed(root / "profiles/testbeds/inertial_2dof.toml"))
