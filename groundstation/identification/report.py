@@ -4,7 +4,6 @@ used for; how well the base and the identified model match the measurements."""
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 from .pipeline import Identification
@@ -54,7 +53,7 @@ def as_text(result: Identification, written_to: str = "") -> str:
     lines.append(f"model vs measured, RMS over the used bins: base {fit.base_rms_magnitude_db:.2f} dB"
                  f" / {fit.base_rms_phase_deg:.1f} deg, identified {fit.rms_magnitude_db:.2f} dB / "
                  f"{fit.rms_phase_deg:.1f} deg (reduced chi-square "
-                 f"{fit.reduced_chi_square:.2f}{'' if math.isfinite(fit.reduced_chi_square) else ''})")
+                 f"{fit.reduced_chi_square:.2f})")
     lines += [f"note: {n}" for n in result.notes]
     if written_to:
         lines.append(f"written: {written_to}")
