@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -21,7 +22,8 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                     "responses of open-loop random-excitation logs (the open_loop_sysid "
                     "campaign), starting from a base testbed file, and write the identified "
                     "testbed file.  Exit 0: written; 1: the logs cannot identify the rig "
-                    "(nothing written); 2: unreadable input.")
+                    "(nothing written); 2: unreadable input or a report folder that cannot "
+                    "be made.")
     s.add_argument("logs", nargs="+", metavar="LOG",
                    help="identification logs (.h5), or a campaign's report.json (its logs)")
     s.add_argument("--testbed", required=True, metavar="BASE.toml",
@@ -37,6 +39,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                    help="bins below this coherence are not fitted (default 0.9)")
     s.add_argument("--json", default=None, metavar="FILE",
                    help="also write the figures as JSON ('-': standard output)")
+    s.add_argument("--report", default=None, metavar="DIR",
+                   help="also write the report into DIR (made if missing): identification.txt and "
+                        ".json, the figures as identification.*.png and identification.html, "
+                        "one self-contained page")
     s.set_defaults(func=_cmd_identify)
 
 
@@ -57,12 +63,45 @@ def _log_paths(items: list[str]) -> list[Path]:
     return paths
 
 
+def _report_folder_problem(folder: Path) -> str:
+    """Why `folder` cannot be made or written ('' if it can), told before the fit so a
+    mistyped --report costs no identification."""
+    existing = folder
+    while not existing.exists() and existing != existing.parent:
+        existing = existing.parent
+    if not existing.is_dir():
+        return f"{existing} is not a folder"
+    if not os.access(existing, os.W_OK | os.X_OK):
+        return f"{existing} is not writable"
+    return ""
+
+
+def _write_report(folder: Path, result, written: str) -> int:
+    from ..identification.html import write_report
+
+    try:
+        paths = write_report(result, folder, written)
+    except OSError as exc:
+        kept = f" (the testbed file {written} is written)" if written else ""
+        print(f"error: --report {folder}: cannot write the report ({exc}){kept}",
+              file=sys.stderr)
+        return EXIT_BAD_INPUT
+    print(f"report: {paths[-1].resolve()}", flush=True)
+    return EXIT_OK
+
+
 def _cmd_identify(args) -> int:
     from ..core.errors import GroundStationError
     from ..identification.pipeline import DEFAULT_BAND_HZ, IdentificationError, identify
     from ..identification.report import as_json, as_text
     from ..identification.testbed_file import write_identified
 
+    report = Path(args.report) if args.report else None
+    problem = _report_folder_problem(report) if report is not None else ""
+    if problem:
+        print(f"error: --report {report}: cannot make the report folder ({problem}); "
+              f"nothing identified", file=sys.stderr)
+        return EXIT_BAD_INPUT
     try:
         paths = _log_paths(args.logs)
         missing = [str(p) for p in paths if not p.is_file()]
@@ -85,7 +124,8 @@ def _cmd_identify(args) -> int:
         name = args.name or f"{result.base.name} (identified)"
         try:
             tb = write_identified(result.base, result.written, result.provenance, args.out,
-                                  name=name, logs=[u.path.name for u in result.logs if u.used])
+                                  name=name, logs=[u.path.name for u in result.logs if u.used],
+                                  slope_table=result.slope_table)
         except GroundStationError as exc:
             print(as_text(result), flush=True)
             print(f"error: {exc}", file=sys.stderr)
@@ -98,4 +138,4 @@ def _cmd_identify(args) -> int:
             print(text)
         else:
             Path(args.json).write_text(text + "\n", encoding="utf-8")
-    return EXIT_OK
+    return _write_report(report, result, written) if report is not None else EXIT_OK
