@@ -86,7 +86,7 @@ from . import AnalysisError
 
 __all__ = [
     "FrictionIdError", "Branch", "HysteresisLoop", "FrictionIdentification", "DEFAULT_X_GRID",
-    "split_branches", "identify_friction", "write_slope_table",
+    "split_branches", "identify_friction", "combine_tables", "write_slope_table",
 ]
 
 
@@ -519,6 +519,37 @@ def identify_friction(angle_rad, torque_in_oz, *, sigma_in_oz_per_rad: float,
         coulomb_torque_estimated=estimated, x=grid.copy(), f=f, f_raw=f_raw,
         f_per_branch=f_per_branch, branches_per_point=counts, identified=identified,
         monotone=bool(monotone), monotone_violation=max(violation, 0.0))
+
+
+def combine_tables(identifications, *, monotone: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One slope table from several records' (same grid, same σ and T_c): at each grid
+    point the compliance-mean of every record's branches that covered it, as
+    identify_friction combines the branches of one record; then made non-increasing and
+    filled as there.  Returns (x, f, points identified by data).  A record that did not
+    reach a point (a small triangle stays in the presliding range, x < 2) does not
+    dilute it with its filled value."""
+    idents = list(identifications)
+    if not idents:
+        raise FrictionIdError("no record to combine")
+    grid = idents[0].x
+    for i in idents[1:]:
+        if i.x.shape != grid.shape or np.any(i.x != grid):
+            raise FrictionIdError("the records' slope tables are on different grids")
+        if i.sigma_in_oz_per_rad != idents[0].sigma_in_oz_per_rad:
+            raise FrictionIdError("the records' slope tables use different rest stiffnesses")
+    counts = np.sum([i.branches_per_point for i in idents], axis=0).astype(float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # a record's compliance mean x its branch count = the sum of its compliances
+        compliance = np.nansum([np.where(i.identified, i.branches_per_point / i.f_raw, 0.0)
+                                for i in idents], axis=0)
+        f_raw = np.where(counts > 0, counts / compliance, np.nan)
+    identified = np.isfinite(f_raw) & (f_raw > 0)
+    if not np.any(identified):
+        raise FrictionIdError("no record covers any grid point of the table")
+    f = np.where(identified, f_raw, np.nan)
+    if monotone:
+        f[identified] = _pava_nonincreasing(f[identified], counts[identified])
+    return grid.copy(), _fill(grid, f), identified
 
 
 def write_slope_table(path, x, f, *, comment: str | None = None) -> Path:

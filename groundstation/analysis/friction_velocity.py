@@ -448,6 +448,11 @@ class CoulombViscousFit:
     offset_in_oz: float | None                 # None: one direction only
     residual_rms_in_oz: float
     points: int
+    #: standard deviations of coulomb and viscous from the residuals (None: no residual
+    #: degree of freedom, or no slope fitted)
+    coulomb_sd_in_oz: float | None = None
+    viscous_sd_in_oz_s_per_rad: float | None = None
+    dof: int = 0                               # residual degrees of freedom
 
     def torque(self, velocity_rad_s) -> np.ndarray:
         v = np.asarray(velocity_rad_s, dtype=np.float64)
@@ -485,10 +490,18 @@ def coulomb_viscous_fit(velocity_rad_s, torque_in_oz) -> CoulombViscousFit:
         offset, i = float(coef[0]), 1
     coulomb = float(coef[i])
     viscous = float(coef[i + 1]) if slope else None
+    sds: list[float | None] = [None] * A.shape[1]
+    dof = A.shape[0] - A.shape[1]
+    if dof > 0:
+        # the usual least-squares covariance: residual variance x (A'A)^-1
+        cov = float(resid @ resid) / dof * np.linalg.pinv(A.T @ A)
+        sds = [float(np.sqrt(max(c, 0.0))) for c in np.diag(cov)]
     return CoulombViscousFit(coulomb_in_oz=coulomb, viscous_in_oz_s_per_rad=viscous,
                              offset_in_oz=offset,
                              residual_rms_in_oz=float(np.sqrt(np.mean(resid ** 2))),
-                             points=int(v.size))
+                             points=int(v.size), coulomb_sd_in_oz=sds[i],
+                             viscous_sd_in_oz_s_per_rad=sds[i + 1] if slope else None,
+                             dof=max(dof, 0))
 
 
 __all__ = ["BlockAccumulator", "CoulombViscousFit", "DEFAULT_BLOCK_S", "DEFAULT_MIN_SPEED_RAD_S",

@@ -67,7 +67,11 @@ class TestbedInfo:
     note: str = ""                  # why there is no model, if there is none
 
     def number(self, section: str, key: str) -> float | None:
-        sec = self.doc.get(section)
+        # the record's values first: a Testbed made with other values than its file's
+        # (an identified plant, plant_fit.with_values) is what the caller means
+        sec = getattr(self.model, section, None) if self.model is not None else None
+        if not isinstance(sec, dict) or key not in sec:
+            sec = self.doc.get(section)
         v = sec.get(key) if isinstance(sec, dict) else None
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
             return None

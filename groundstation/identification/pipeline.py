@@ -9,11 +9,17 @@ serves, the responses from the excited motor's current to both encoders (and the
 on the inertial rig) are estimated (analysis.log_frf) and fitted together
 (analysis.plant_fit).
 
-The bearing's viscous coefficient b_f is fitted, but not written: under random
-excitation the Coulomb friction acts as an extra damping of about the same kind, so the
-fitted b_f is an effective damping at that excitation level (on the twin, about 10 %
-above the true b_f at 1 A), not the b_f of the friction model.  It is reported as that;
-the steady-state friction sweep is what measures b_f.
+The bearing's viscous coefficient b_f is fitted, but not written from the frequency
+responses: under random excitation the Coulomb friction acts as an extra damping of about
+the same kind, so the fitted b_f is an effective damping at that excitation level (on the
+twin, about 10 % above the true b_f at 1 A), not the b_f of the friction model.  It is
+reported as that; the steady-state friction sweep is what measures b_f.
+
+Which log serves what is read off the log: a log whose profile drives a motor current
+(PROFILE_BEGIN's target, in the log's command journal) serves the plant fit; a log whose
+profile drives the position reference serves the friction (friction.py: the velocity
+sweep, the hysteresis loops), which is identified after the plant, with the identified
+plant.
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ from ..analysis.plant_fit import (FRICTION_STIFFNESS, MeasuredResponse, Paramete
 from ..core.errors import GroundStationError
 from ..logs.reader import LogReader
 from ..plant.testbed import Testbed, load_testbed
+from .friction import FrictionFit, identify_friction_logs
 from .testbed_file import Provenance
 
 #: below this RMS current (A) the bearing sticks: the log does not serve the plant fit
@@ -42,6 +49,9 @@ DEFAULT_BAND_HZ = (15.0, 300.0)
 #: fitted, reported, not written (see the module docstring)
 EFFECTIVE_ONLY = ("mechanics.bearing_viscous", FRICTION_STIFFNESS.name)
 INPUTS = ("current_coarse", "current_fine")
+#: PROFILE_BEGIN's targets (protocol/commands.toml): what a log's profile drives
+CURRENT_TARGETS = {2, 3}
+POSITION_TARGETS = {0, 1}
 
 
 class IdentificationError(GroundStationError):
@@ -56,6 +66,7 @@ class LogUse:
     input_channel: str               # the excited motor's current ('' if none)
     current_rms_a: float
     note: str = ""
+    purpose: str = "plant"           # 'plant' (open-loop current) or 'friction' (position)
 
 
 @dataclass(frozen=True, eq=False)
@@ -67,6 +78,13 @@ class Identification:
     written: dict[str, float]    # what goes into the testbed file
     provenance: tuple[Provenance, ...]
     notes: tuple[str, ...]
+    friction: FrictionFit | None = None    # None: no log served the friction
+
+    @property
+    def slope_table(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """The identified slope table (x, f) to write beside the file (None: keep the base's)."""
+        t = self.friction.slope_table if self.friction is not None else None
+        return None if t is None else (t[0], t[1])
 
 
 def _testbed_kind(text: str) -> tuple[str, str]:
@@ -84,6 +102,7 @@ def _examine(path: Path, base: Testbed) -> LogUse:
         with LogReader(path) as r:
             _, _, text = r.testbed()
             data = r.read("HIGH_RATE", list(INPUTS))
+            targets = _profile_targets(r)
     except GroundStationError as exc:
         raise IdentificationError(f"{path.name}: cannot be read ({exc})") from None
     kind = _testbed_kind(text) if text else ("", "")
@@ -95,6 +114,10 @@ def _examine(path: Path, base: Testbed) -> LogUse:
     rms = {c: float(np.sqrt(np.nanmean(np.square(np.asarray(data[c], dtype=float)))))
            if len(data[c]) else 0.0 for c in INPUTS}
     channel = max(INPUTS, key=lambda c: rms[c])
+    if targets & POSITION_TARGETS and not targets & CURRENT_TARGETS:
+        return LogUse(path, True, channel, rms[channel], "", "friction")
+    if targets and not targets & CURRENT_TARGETS:
+        return LogUse(path, False, "", rms[channel], "plays no current or position profile")
     if not rms[channel] > 0.0:
         return LogUse(path, False, "", 0.0, "no motor current: not an identification log")
     if rms[channel] < MIN_CURRENT_RMS_A:
@@ -102,6 +125,17 @@ def _examine(path: Path, base: Testbed) -> LogUse:
                       f"{rms[channel]:.3g} A RMS: the bearing sticks at this level (presliding "
                       f"friction), which the linear plant leaves out; not used")
     return LogUse(path, True, channel, rms[channel])
+
+
+def _profile_targets(r: LogReader) -> set[int]:
+    """The targets of the profiles the log's session began (its command journal)."""
+    out = set()
+    for rec in r.journal("command"):
+        if rec.data.get("name") == "PROFILE_BEGIN":
+            target = (rec.data.get("arguments") or {}).get("target")
+            if isinstance(target, int):
+                out.add(target)
+    return out
 
 
 def _responses(use: LogUse, base: Testbed) -> list:
@@ -141,20 +175,40 @@ def _written(fit: PlantFit) -> tuple[dict[str, float], list[Provenance], list[st
     return written, provenance, notes
 
 
+def _with_friction(written: dict[str, float], provenance: list[Provenance], notes: list[str],
+                   friction: FrictionFit | None) -> None:
+    """Put the friction's identified values and provenance in (the velocity sweep's b_f
+    replaces the frequency-response fit's effective one)."""
+    if friction is None:
+        return
+    ours = {e.name for e in friction.estimates}
+    provenance[:] = [p for p in provenance if p.name not in ours]
+    provenance += [_provenance(e) for e in friction.estimates]
+    written.update(friction.written)
+    if "mechanics.bearing_viscous" in friction.written:
+        notes[:] = [n.replace("not written (the base value stays)",
+                              "the velocity sweep's b_f is written instead")
+                    if n.startswith("mechanics.bearing_viscous:") else n for n in notes]
+    notes += friction.notes
+
+
 def identify(paths: Sequence[str | Path], base_path: str | Path, *,
              band_hz: tuple[float, float] = DEFAULT_BAND_HZ,
              min_coherence: float = 0.9) -> Identification:
-    """Identify the plant of the rig that recorded `paths`, starting from `base_path`."""
+    """Identify the rig that recorded `paths`, starting from `base_path`: the plant from
+    its open-loop current logs, then its friction from its position-profile logs."""
     base = load_testbed(base_path)
     if not paths:
         raise IdentificationError("no logs given: record the open_loop_sysid campaign on "
                                   "the rig and give its logs (or its report.json)")
     uses = [_examine(Path(p), base) for p in paths]
-    serving = [u for u in uses if u.used]
+    serving = [u for u in uses if u.used and u.purpose == "plant"]
     if not serving:
         raise IdentificationError(
             "none of the logs is an open-loop random excitation of at least "
-            f"{MIN_CURRENT_RMS_A:g} A RMS: " + "; ".join(f"{u.path.name}: {u.note}" for u in uses))
+            f"{MIN_CURRENT_RMS_A:g} A RMS (the plant is fitted first, the friction with it): "
+            + "; ".join(f"{u.path.name}: {u.note or 'a position profile (friction)'}"
+                        for u in uses))
     responses = [lf for u in serving for lf in _responses(u, base)]
     measured = [MeasuredResponse(lf.model_path, lf.measured.freq_hz, lf.measured.response,
                                  lf.measured.coherence, lf.measured.segments, lf.path.name)
@@ -168,6 +222,9 @@ def identify(paths: Sequence[str | Path], base_path: str | Path, *,
     except GroundStationError as exc:
         raise IdentificationError(f"the plant fit failed: {exc}") from None
     written, provenance, notes = _written(fit)
+    friction = identify_friction_logs([u.path for u in uses if u.used and u.purpose == "friction"],
+                                      base, fit.testbed)
+    _with_friction(written, provenance, notes, friction)
     notes += fit.messages
     return Identification(base, fit, tuple(uses), tuple(responses), written,
-                          tuple(provenance), tuple(notes))
+                          tuple(provenance), tuple(notes), friction)

@@ -30,7 +30,8 @@ def as_json(result: Identification, written_to: str = "") -> dict[str, Any]:
         "rms_phase_deg": {"identified": fit.rms_phase_deg, "base": fit.base_rms_phase_deg},
         "parameters": parameter_rows(result),
         "logs": [{"path": str(u.path), "used": u.used, "input": u.input_channel,
-                  "current_rms_a": u.current_rms_a, "note": u.note} for u in result.logs],
+                  "current_rms_a": u.current_rms_a, "note": u.note,
+                  "purpose": u.purpose} for u in result.logs],
         "notes": list(result.notes)}
 
 
@@ -41,7 +42,8 @@ def as_text(result: Identification, written_to: str = "") -> str:
              f"{fit.min_coherence:g} in {fit.band_hz[0]:g}-{fit.band_hz[1]:g} Hz"]
     for u in result.logs:
         lines.append(f"  {'used' if u.used else 'not used'}: {u.path.name}"
-                     + (f" ({u.input_channel}, {u.current_rms_a:.3g} A RMS)" if u.input_channel else "")
+                     + (" (friction: a position profile)" if u.purpose == "friction" else
+                        f" ({u.input_channel}, {u.current_rms_a:.3g} A RMS)" if u.input_channel else "")
                      + (f" - {u.note}" if u.note else ""))
     lines.append(f"{'parameter':32s} {'base':>11s} {'identified':>11s} {'change':>8s}  "
                  f"95 % interval")

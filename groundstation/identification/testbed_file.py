@@ -6,7 +6,9 @@ The base file's text is edited rather than the file written anew, so that its co
 its [assumed] list and everything the fit did not touch read exactly as before; a value
 the fit changed gets a comment with the base value.  The new text is written to a
 temporary file beside the target, loaded as any testbed file is, and only then put in
-place: a file that would not load is never left behind.
+place: a file that would not load is never left behind.  An identified slope table is
+written beside it (RIG_slope_table.csv) and the file points at it; a table that was not
+there before is removed again when the file is not written.
 """
 
 from __future__ import annotations
@@ -18,6 +20,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Sequence
 
+from ..analysis.friction_id import write_slope_table
 from ..core.errors import GroundStationError
 from ..core.tomlfile import relative_path, toml_number, toml_string
 from ..plant.testbed import Testbed, load_testbed
@@ -108,8 +111,15 @@ def _identification_block(base: Testbed, provenance: Sequence[Provenance], logs:
     return lines
 
 
+def slope_table_path(out: str | Path) -> Path:
+    """Where the identified slope table of the file `out` is written."""
+    out = Path(out)
+    return out.with_name(f"{out.stem}_slope_table.csv")
+
+
 def identified_text(base: Testbed, values: dict[str, float], provenance: Sequence[Provenance],
-                    out: Path, *, name: str, logs: Sequence[str] = (), note: str = "") -> str:
+                    out: Path, *, name: str, logs: Sequence[str] = (), note: str = "",
+                    own_table: bool = False) -> str:
     """The text of the identified file that will live at `out`."""
     folder = Path(out).resolve().parent
     texts = {k: toml_number(v, TestbedWriteError) for k, v in values.items()}
@@ -121,21 +131,42 @@ def identified_text(base: Testbed, values: dict[str, float], provenance: Sequenc
         if isinstance(was, (int, float)):
             comments[k] = f"# identified (base {toml_number(float(was))})"
     texts["testbed.name"] = toml_string(name)
-    if base.friction.get("slope_table"):
+    if own_table:
+        texts["friction.slope_table"] = toml_string(slope_table_path(out).name)
+        comments["friction.slope_table"] = "# identified (beside this file)"
+    elif base.friction.get("slope_table"):
         texts["friction.slope_table"] = toml_string(relative_path(base.slope_table_path, folder))
     lines = _replace_values(_strip_identification(base.text.splitlines()), texts, comments)
     return "\n".join(lines + _identification_block(base, provenance, logs, folder, note)) + "\n"
 
 
+def _write_table(out: Path, table, logs: Sequence[str]) -> bool:
+    """Write the slope table beside `out`; True if the file was not there before."""
+    path = slope_table_path(out)
+    new = not path.exists()
+    try:
+        write_slope_table(path, table[0], table[1],
+                          comment=f"identified by `groundstation identify` from "
+                                  f"{', '.join(logs) or 'the logs'} (for {out.name})")
+    except GroundStationError as exc:
+        raise TestbedWriteError(f"{out}: not written: {exc}") from None
+    return new
+
+
 def write_identified(base: Testbed, values: dict[str, float], provenance: Sequence[Provenance],
                      out: str | Path, *, name: str, logs: Sequence[str] = (),
-                     note: str = "") -> Testbed:
-    """Write the identified testbed file to `out` and return it as load_testbed reads it;
-    TestbedWriteError (and `out` untouched) if it cannot be written or would not load."""
+                     note: str = "", slope_table=None) -> Testbed:
+    """Write the identified testbed file to `out` (and `slope_table` (x, f) beside it)
+    and return it as load_testbed reads it; TestbedWriteError (and `out` untouched) if it
+    cannot be written or would not load."""
     out = Path(out)
-    text = identified_text(base, values, provenance, out, name=name, logs=logs, note=note)
+    text = identified_text(base, values, provenance, out, name=name, logs=logs, note=note,
+                           own_table=slope_table is not None)
     tmp = out.with_name(f".{out.name}.writing")
+    new_table = False
     try:
+        if slope_table is not None:
+            new_table = _write_table(out, slope_table, logs)
         tmp.write_text(text, encoding="utf-8")
         try:
             load_testbed(tmp)
@@ -143,8 +174,11 @@ def write_identified(base: Testbed, values: dict[str, float], provenance: Sequen
             raise TestbedWriteError(f"{out}: not written: the identified file would not load "
                                     f"({exc})") from None
         os.replace(tmp, out)
+        new_table = False
     except OSError as exc:
         raise TestbedWriteError(f"{out}: cannot write ({exc.strerror or exc})") from None
     finally:
         tmp.unlink(missing_ok=True)
+        if new_table:
+            slope_table_path(out).unlink(missing_ok=True)
     return load_testbed(out)

@@ -6,8 +6,12 @@ loads everywhere.  One relative and one inertial 2-DOF rig.
 
 Tolerances: on the twin, whose bearing has Dahl friction the linear plant leaves out,
 the fit is biased by under 1 % for the inertias, the flexure and the fine motor
-(docs/identification.md, measured); 3 % is asserted.  The bearing's viscous b_f is
-fitted as an effective damping and not written (pipeline.py)."""
+(docs/identification.md, measured); 3 % is asserted.  The relative rig's friction
+(T_c +20 %, b_f x1.5, a steeper slope table) is identified from a hysteresis triangle
+and constant-velocity passes: T_c and b_f came out within 0.05 %, the table within
+8 % over its first tenth of the swing and 3 % beyond (measured); 1 %, 2 % and 12 % / 5 %
+are asserted.  On the inertial rig no friction log is given: b_f is fitted as an
+effective damping from the responses and not written (pipeline.py)."""
 
 from __future__ import annotations
 
@@ -15,11 +19,14 @@ import json
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from groundstation import Testbed
 from groundstation.cli.main import main
+from groundstation.plant.slope_table import load_slope_table
 from groundstation.plant.testbed import load_testbed
+from groundstation.profiles.profile import profile_from_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 WAVEFORMS = ROOT / "profiles/waveforms"
@@ -29,11 +36,24 @@ RECORD_S = 8.0
 RIGS = {
     "relative": ("relative_2dof.toml", {"mechanics.J1": 1.08, "mechanics.flexure_stiffness": 0.88,
                                         "mechanics.flexure_damping": 2.0,
-                                        "motor_fine.torque_constant": 0.95}),
+                                        "motor_fine.torque_constant": 0.95,
+                                        "mechanics.bearing_viscous": 1.5,
+                                        "friction.coulomb_torque": 1.2}),
     "inertial": ("inertial_2dof.toml", {"mechanics.J2": 0.93, "mechanics.flexure_stiffness": 1.1,
                                         "mechanics.flexure_damping": 1.5,
                                         "sensors.gyro_delay": 1.12}),
 }
+
+
+#: the hidden relative rig's bearing: the shipped table's shape bent (steeper at the
+#: reversal, shallower late), so that identify cannot find it by keeping the base's
+def hidden_slope_table(folder: Path) -> Path:
+    rows = [line.split(",") for line in (ROOT / "profiles/friction_slope_lut.csv").read_text()
+            .splitlines() if line and line[0].isdigit()]
+    out = folder / "hidden_slope_table.csv"
+    out.write_text("x,slope_ratio\n" + "".join(
+        f"{float(x)!r},{float(f) * 0.8 * (1.3 - 0.15 * float(x))!r}\n" for x, f in rows))
+    return out
 
 
 def hidden_file(base: Path, factors: dict[str, float], folder: Path) -> Path:
@@ -47,7 +67,7 @@ def hidden_file(base: Path, factors: dict[str, float], folder: Path) -> Path:
             value = float(m.group(2)) * factors[f"{section}.{m.group(1)}"]
             line = f"{m.group(1)} = {value!r}"
         elif line.startswith("slope_table = "):
-            line = f'slope_table = "{(base.parent / "../friction_slope_lut.csv").resolve()}"'
+            line = f'slope_table = "{hidden_slope_table(folder).as_posix()}"'
         text.append(line)
     out = folder / f"hidden_{base.name}"
     out.write_text("\n".join(text) + "\n")
@@ -69,8 +89,34 @@ def rig(request, tmp_path_factory):
             tb.dwell(0.2)
             tb.play(WAVEFORMS / f"{profile}.toml", max_seconds=RECORD_S)
             tb.stop_recording()
+    if request.param == "relative":
+        logs += friction_logs(hidden, folder)
     return {"base": base, "hidden": load_testbed(hidden), "factors": factors, "logs": logs,
             "folder": folder}
+
+
+#: a hysteresis triangle (+-0.05 deg at 0.01 deg/s, two cycles: 40 s of device time, 10x
+#: the reference's speed, still quasi-static) and two of the shipped velocity ramps
+TRIANGLE = {"profile": {"name": "friction_triangle_test", "target": "REFERENCE", "units": "rad",
+                        "origin": "relative"},
+            "generator": {"type": "triangle", "amplitude_deg": 0.05, "velocity_deg_per_s": 0.01,
+                          "cycles": 2, "turnaround_s": 0.5}}
+
+
+def friction_logs(hidden: Path, folder: Path) -> list[Path]:
+    """The friction campaigns' kind of log, in closed loop with relative Design #2."""
+    logs = []
+    for name, profile in (("triangle", profile_from_dict(TRIANGLE)),
+                          ("ramp_1dps", WAVEFORMS / "velocity_ramp_1dps.toml"),
+                          ("ramp_10dps", WAVEFORMS / "velocity_ramp_10dps.toml")):
+        with Testbed("sim", testbed=hidden, fast=True, generator=None, log_folder=folder / "logs",
+                     history=folder / "history") as tb:
+            tb.upload_design(ROOT / "profiles/controllers/relative_design2.toml",
+                             accept_risk="marginal on the hidden rig; a friction record in a test")
+            logs.append(tb.start_recording(name))
+            tb.play(profile)
+            tb.stop_recording()
+    return logs
 
 
 def test_identify_finds_the_hidden_rig_and_writes_a_file_that_loads(rig, capsys):
@@ -96,13 +142,45 @@ def test_identify_finds_the_hidden_rig_and_writes_a_file_that_loads(rig, capsys)
         "value"] == pytest.approx(figures["mechanics.J1" if "mechanics.J1" not in rig["factors"]
                                           else "mechanics.J2"]["base"], rel=0.03)
     assert figures["motor_coarse.torque_constant"]["status"] == "held (scale)"
-    assert figures["mechanics.bearing_viscous"]["status"] == "held (friction)"
-    assert identified.mechanics["bearing_viscous"] == hidden.mechanics["bearing_viscous"]
+    if "friction.coulomb_torque" not in rig["factors"]:
+        assert figures["mechanics.bearing_viscous"]["status"] == "held (friction)"
+        assert identified.mechanics["bearing_viscous"] == hidden.mechanics["bearing_viscous"]
+        assert identified.slope_table_path == (ROOT / "profiles/friction_slope_lut.csv").resolve()
     # the identified file is a testbed file like any other: the twin runs on it
     with Testbed("sim", testbed=out, fast=True, generator=None,
                  log_folder=rig["folder"] / "logs2", history=rig["folder"] / "h2") as tb:
         tb.dwell(0.1)
         assert tb.state.tick > 0                      # its telemetry arrives
+
+
+@pytest.mark.parametrize("rig", ["relative"], indirect=True)
+def test_the_friction_of_the_hidden_rig_is_identified(rig, capsys):
+    """The friction campaigns are relative-rig campaigns: friction logs are recorded there."""
+    out = rig["folder"] / "friction_rig.toml"
+    report = rig["folder"] / "friction.json"
+    assert main(["identify", *map(str, rig["logs"]), "--testbed", str(rig["base"]),
+                 "--out", str(out), "--json", str(report)]) == 0
+    text = capsys.readouterr().out
+    assert "(friction: a position profile)" in text
+    figures = {p["name"]: p for p in json.loads(report.read_text())["parameters"]}
+    hidden, identified = rig["hidden"], load_testbed(out)
+    for name, tolerance in (("friction.coulomb_torque", 0.01), ("mechanics.bearing_viscous", 0.02)):
+        section, key = name.split(".")
+        row = figures[name]
+        assert row["status"] == "identified" and row["sources"], row
+        assert row["value"] == pytest.approx(getattr(hidden, section)[key], rel=tolerance), row
+        assert getattr(identified, section)[key] == pytest.approx(row["value"], rel=1e-9)
+    assert figures["friction.sigma"]["status"] == "held (scale)"
+    # the table is written beside the file and read from there
+    assert identified.slope_table_path == (rig["folder"] / "friction_rig_slope_table.csv").resolve()
+    x, f = load_slope_table(identified.slope_table_path)
+    tx, tf = load_slope_table(hidden.slope_table_path)
+    truth = np.interp(x, tx, tf)
+    early, middle = (x < 0.15), (x >= 0.15) & (x <= 1.7)
+    assert np.all(np.abs(f[early] / truth[early] - 1) < 0.12), (f[early], truth[early])
+    assert np.all(np.abs(f[middle] / truth[middle] - 1) < 0.05), (f[middle], truth[middle])
+    row = figures["friction.slope_table f(0)"]
+    assert row["ci95"][0] <= truth[0] <= row["ci95"][1], row
 
 
 def test_logs_of_another_kind_of_rig_are_refused(rig, capsys):
@@ -153,9 +231,10 @@ DESIGNS = {"relative": ("relative_design2.toml", "RELATIVE"),
 
 
 def test_a_campaign_runs_on_the_identified_rig(rig, capsys, monkeypatch):
-    """A shipped design, judged by the upload gate on the identified plant (both are
-    marginal there: the relative design's gain margin falls to 4.6 dB, the inertial
-    one's phase margin is 14 deg) and sent with the risk accepted, holds the LOS."""
+    """A shipped design, judged by the upload gate on the identified plant, holds the
+    LOS.  The relative design's gain margin falls from 29.1 dB to 6.2 dB there, just above
+    the gate's 6 dB (the hidden rig's bearing damps 1.5x more); the inertial design's
+    phase margin is 14 deg, below the gate's, and it is sent with the risk accepted."""
     out = rig["folder"] / "campaign_rig.toml"
     assert main(["identify", *map(str, rig["logs"]), "--testbed", str(rig["base"]),
                  "--out", str(out)]) == 0
@@ -171,4 +250,4 @@ def test_a_campaign_runs_on_the_identified_rig(rig, capsys, monkeypatch):
     assert "COMPLETED - 7 step(s) done, 1 run(s) complete" in text
     # the upload gate judged the design on the identified plant, not the one it names
     assert f"{design}: validated on this session's testbed campaign_rig.toml" in text
-    assert "margins accepted" in text
+    assert ("margins accepted" in text) == (mode == "INERTIAL")
