@@ -86,6 +86,7 @@ class MainWindow(QMainWindow):
         self.campaign = CampaignPanel(session)
         self.campaign.sig_abort.connect(self.abort)
         self.analysis = AnalysisPanel(session)
+        self.analysis.sig_open_workbench.connect(self.open_workbench_on_testbed)
         # the one-click demo on the simulated testbed (through the two docks above)
         self.demo = DemoController(session, self.parameters, self.profiles, self.charts, parent=self)
 
@@ -261,6 +262,13 @@ class MainWindow(QMainWindow):
     def _analysis_folder_dialog(self) -> None:
         self._show_dock("Analysis")
         self.analysis.folder_dialog()
+
+    def open_workbench_on_testbed(self, path: str) -> bool:
+        """The design workbench (the Parameters dock's window) on a testbed file the
+        Analysis dock identified: the dock's design, or a shipped one of the rig's kind,
+        on that file beside the same design on the testbed it names."""
+        workbench = self.parameters.open_workbench()
+        return workbench.open_on_testbed(path, self.parameters.design)
 
     def _campaign_running(self, running: bool) -> None:
         for button in self.commands.findChildren(QPushButton):

@@ -73,7 +73,9 @@ class OptionsBox(QGroupBox):
             self.testbed.addItem(path.stem, str(path))
         self.testbed.setToolTip("the testbed whose model and constants are used (default: the "
                                 "file the log recorded; for the live window, the session's "
-                                "testbed, or the replayed log's)")
+                                "testbed, or the replayed log's).  Identify starts from it as "
+                                "the base; with \"the log's\" from the session's testbed file, "
+                                "or one it asks for - never the file a log recorded")
         form.addRow("sensor", self.sensor)
         form.addRow("integration", self.period)
         form.addRow("window s", window)
@@ -109,7 +111,8 @@ class OptionsBox(QGroupBox):
 
 
 class ActionsBox(QWidget):
-    """The job buttons (Metrics, FRF, Hysteresis, Step), Cancel, Export and the status line."""
+    """The job buttons (Metrics, FRF, Hysteresis, Step, Identify), Cancel, Export and the
+    status line."""
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
@@ -125,6 +128,10 @@ class ActionsBox(QWidget):
         self.hysteresis_button.setToolTip("friction torque against angle of every ticked log")
         self.step_button = QPushButton("Step")
         self.step_button.setToolTip("step response (rise, overshoot, settling) of every ticked log")
+        self.identify_button = QPushButton("Identify")
+        self.identify_button.setToolTip("fit the rig's testbed to the ticked open-loop "
+                                        "identification logs, from the base testbed chosen "
+                                        "under Options; save it as a testbed file")
         self.cancel_button = QPushButton("Cancel")
         self.cancel_button.setToolTip("stop the analysis under way (its results are dropped)")
         self.cancel_button.setEnabled(False)
@@ -143,12 +150,13 @@ class ActionsBox(QWidget):
         self.export_button.setToolTip("write a table (CSV, JSON) or the plots of the tab shown "
                                       "(PNG)")
         buttons = (self.metrics_button, self.frf_button, self.hysteresis_button,
-                   self.step_button, self.cancel_button, self.export_button)
+                   self.step_button, self.identify_button, self.cancel_button,
+                   self.export_button)
         for i, b in enumerate(buttons):
             grid.addWidget(b, i // 2, i % 2)
         self.export_button.setSizePolicy(self.metrics_button.sizePolicy())
         col.addLayout(grid)
-        self.status = QLabel("tick logs, then Metrics, FRF, Hysteresis or Step")
+        self.status = QLabel("tick logs, then Metrics, FRF, Hysteresis, Step or Identify")
         self.status.setWordWrap(True)
         self.status.setTextFormat(Qt.TextFormat.PlainText)
         self.status.setTextInteractionFlags(Qt.TextInteractionFlag.TextSelectableByMouse)
@@ -158,7 +166,8 @@ class ActionsBox(QWidget):
 
     def job_buttons(self) -> dict[str, QPushButton]:
         return {"metrics": self.metrics_button, "frf": self.frf_button,
-                "hysteresis": self.hysteresis_button, "step": self.step_button}
+                "hysteresis": self.hysteresis_button, "step": self.step_button,
+                "identify": self.identify_button}
 
     def say(self, text: str, style: str = "") -> None:
         self.status.setStyleSheet(style)

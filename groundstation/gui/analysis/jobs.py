@@ -1,19 +1,21 @@
 """The Analysis dock's worker: reading logs and computing their figures off the GUI
 thread, the results back as typed Qt signals (one per event).  No widgets here.
 
-Each kind of job (metrics, frf, hysteresis, step, folder) runs on a thread of its own,
-one at a time per kind: `start` refuses a second one of the same kind while the first
-runs (the panel's button is off meanwhile), so a result always answers the last request
-of its kind.  Metrics, FRF, hysteresis and step work through a batch of logs in turn; a
-log that fails only fails its entry (the batch lists it with the reason).  A metrics
+Each kind of job (metrics, frf, hysteresis, step, identify, folder) runs on a thread of
+its own, one at a time per kind: `start` refuses a second one of the same kind while the
+first runs (the panel's button is off meanwhile), so a result always answers the last
+request of its kind.  Metrics, FRF, hysteresis and step work through a batch of logs in
+turn; a log that fails only fails its entry (the batch lists it with the reason).
+Identify takes the logs together (one plant is fitted to all of them), so the logs fail
+together too: pipeline.identify's IdentificationError says which and why.  A metrics
 batch may also hold the live window: an analysis_live.LiveSnapshot, copied from the
 window's store on the GUI thread when the job was asked for, and computed here like
-the logs (live_metrics: analyze_log's code on one chunk).  A job ends
-with exactly one signal: its result (sig_metrics_done, sig_frf_done,
-sig_hysteresis_done, sig_step_done: a Batch; sig_logs_found) or sig_failed(job,
-message) - or, when cancelled, sig_cancelled(job) and nothing after it.  The message of
-a GroundStationError is shown as it is; anything else is a bug, logged with its
-traceback to the Python log and reported in one line.
+the logs (live_metrics: analyze_log's code on one chunk).  A job ends with exactly one
+signal: its result (sig_metrics_done, sig_frf_done, sig_hysteresis_done,
+sig_step_done: a Batch; sig_identify_done: an IdentifyResult; sig_logs_found) or
+sig_failed(job, message) - or, when cancelled, sig_cancelled(job) and nothing after
+it.  The message of a GroundStationError is shown as it is; anything else is a bug,
+logged with its traceback to the Python log and reported in one line.
 
 Cancelling.  `cancel(job)` answers at once on the GUI thread: the kind is free again (a
 new job of it may start) and whatever the cancelled job still sends is dropped.  Every
@@ -21,7 +23,8 @@ worker signal passes through the GUI thread (`_deliver`), which lets through onl
 of the job currently holding the kind - so no stale result can arrive, however the
 threads interleave.  The worker itself stops at its next check: between logs of a
 batch, and for metrics after each chunk analyze_log reads (its on_progress hook); an
-FRF, loop or step of one log in flight is computed to its end and thrown away.
+FRF, loop or step of one log in flight is computed to its end and thrown away, and so
+is an identification (the pipeline has no hook to stop at).
 """
 
 from __future__ import annotations
@@ -39,14 +42,18 @@ from ...analysis import log_frf, log_hysteresis, log_window
 from ...analysis.log_metrics import analyze_log
 from ...analysis.log_step import LogStep, step_from_log
 from ...core.errors import GroundStationError
+from ...identification.curves import ResponseCurves, response_curves
+from ...identification import pipeline
+from ...identification.report import as_text, parameter_rows
 from ...logs import LogReader
 from .live import LiveSnapshot, live_metrics
 
 log = logging.getLogger(__name__)
 
-JOBS = ("metrics", "frf", "hysteresis", "step", "folder")
-#: the kinds that work through a batch of logs (and that Cancel stops)
-BATCH_JOBS = ("metrics", "frf", "hysteresis", "step")
+JOBS = ("metrics", "frf", "hysteresis", "step", "identify", "folder")
+#: the kinds that work on the ticked logs (and that Cancel stops): all but identify
+#: through a batch, a log at a time; identify on all of them at once
+BATCH_JOBS = ("metrics", "frf", "hysteresis", "step", "identify")
 
 
 class Cancelled(Exception):
@@ -100,6 +107,23 @@ def step_trace(path: Path, step: LogStep, start_s: float | None,
     return StepResult(step, t, ref, ref - np.asarray(d["error_angle"], dtype=np.float64))
 
 
+@dataclass(frozen=True, eq=False)
+class IdentifyResult:
+    """An identification and what the window shows of it, all computed on the worker:
+    the parameter rows (report.parameter_rows), the report's text, and each measured
+    response with the base and identified models on its bins (curves.response_curves)."""
+
+    identification: pipeline.Identification
+    rows: tuple[dict[str, Any], ...]
+    curves: tuple[ResponseCurves, ...]
+    text: str
+    base_path: Path
+
+    @property
+    def used_logs(self) -> tuple[Path, ...]:
+        return tuple(u.path for u in self.identification.logs if u.used)
+
+
 class _Job:
     """One job's token: its kind, its thread and whether it was cancelled."""
 
@@ -119,6 +143,7 @@ class AnalysisJobs(QObject):
     sig_frf_done = Signal(object)             # Batch of log_frf.LogFrf
     sig_hysteresis_done = Signal(object)      # Batch of log_hysteresis.LogHysteresis
     sig_step_done = Signal(object)            # Batch of StepResult
+    sig_identify_done = Signal(object)        # IdentifyResult
     sig_logs_found = Signal(str, object)      # folder, list[Path] of its logs
     sig_failed = Signal(str, str)             # job, why (the error's own message)
     sig_cancelled = Signal(str)               # job
@@ -203,6 +228,27 @@ class AnalysisJobs(QObject):
             return step_trace(path, res, start_s, stop_s)
         return self._batch("step", paths, compute)
 
+    def identify(self, paths: list[Path], base: Path, **options) -> bool:
+        """pipeline.identify of the logs together on the base testbed file (options:
+        band_hz, min_coherence), then the rows and curves the window draws."""
+        paths = [Path(p) for p in paths]
+
+        def work(job: _Job):
+            self._post(job, "sig_progress", "identify", 0, len(paths),
+                       f"responses of {len(paths)} log(s), plant fit on {Path(base).name}")
+            try:
+                result = pipeline.identify(paths, base, **options)
+                job.check()
+                self._post(job, "sig_progress", "identify", len(paths), len(paths),
+                           "the models on the measured bins")
+                curves = tuple(response_curves(result))
+            except GroundStationError as exc:      # IdentificationError among them
+                return "sig_failed", ("identify", str(exc))
+            job.check()
+            return "sig_identify_done", (IdentifyResult(
+                result, tuple(parameter_rows(result)), curves, as_text(result), Path(base)),)
+        return self._start("identify", work)
+
     def folder(self, folder: Path) -> bool:
         """The logs in a folder and below (a campaign's), as sig_logs_found."""
         def work(job: _Job):
@@ -283,5 +329,5 @@ class AnalysisJobs(QObject):
         getattr(self, name).emit(*args)
 
 
-__all__ = ["AnalysisJobs", "BATCH_JOBS", "Batch", "JOBS", "MetricsBatch", "StepResult",
-           "step_trace"]
+__all__ = ["AnalysisJobs", "BATCH_JOBS", "Batch", "IdentifyResult", "JOBS", "MetricsBatch",
+           "StepResult", "step_trace"]

@@ -17,7 +17,14 @@ ticked, on the highlighted one), one colour per log in every plot:
 * FRF: the frequency responses overlaid, the testbed model once, and the coherences;
 * Hysteresis: the friction torque against the outer encoder, the loops overlaid;
 * Step: response and reference against the time from the step, and a table of rise,
-  overshoot, settling, steady-state error and peak effort.
+  overshoot, settling, steady-state error and peak effort;
+* Identify: the rig's testbed fitted to the ticked open-loop identification logs
+  together (identification.pipeline), from a base testbed that is always named: the
+  one chosen under Options, else the session's testbed file, else one asked for - never
+  the file a log recorded (on the simulated rig that is the hidden truth the fit is to
+  find).  The Identify tab (analysis/identify.py) shows the parameters, the fit and the
+  overlays; Save testbed file… writes the identified file, and Open in design workbench
+  asks the main window (sig_open_workbench) to open the workbench on the saved file.
 
 Cancel stops the jobs under way (what they computed is dropped); the status line says
 how far a job is (logs done / in all).  Export writes the metrics or step table as CSV
@@ -33,25 +40,32 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from PySide6.QtCore import Signal
 from PySide6.QtWidgets import (QFileDialog, QGroupBox, QHBoxLayout, QPushButton, QTabWidget,
                                QVBoxLayout, QWidget)
 
 from .controls import BAD_STYLE, BUSY_STYLE, ActionsBox, OptionsBox
 from ...core.errors import GroundStationError
 from .export import write_bytes, write_rows
-from .jobs import BATCH_JOBS, AnalysisJobs, Batch
+from .identify import IdentifyView
+from .jobs import BATCH_JOBS, AnalysisJobs, Batch, IdentifyResult
 from .live import live_available, take_snapshot
 from .plots import FrfPlots, HysteresisPlot, SpectraPlots, StepPlots, render_png
 from .runs import LIVE, RunsTable
 from .tables import METRIC_COLUMNS, ResultTable
 from ..common.dock_layout import controls_beside_plots
+from ...plant.testbed import TESTBEDS_DIR
 
-TABS = ("Metrics", "PSD / CSP", "FRF", "Hysteresis", "Step")
+TABS = ("Metrics", "PSD / CSP", "FRF", "Hysteresis", "Step", "Identify")
 LABELS = {"metrics": "Metrics", "frf": "FRF", "hysteresis": "Hysteresis", "step": "Step",
-          "folder": "Folder"}
+          "identify": "Identify", "folder": "Folder"}
 
 
 class AnalysisPanel(QWidget):
+    #: the identified testbed file saved from the Identify tab, to open in the design
+    #: workbench (the main window owns the workbench, through the Parameters dock)
+    sig_open_workbench = Signal(str)
+
     def __init__(self, session, parent: QWidget | None = None):
         """`session`: the window's Session (sig_source tells which log it replays, its
         link state and source whether the Live window row is shown, its recording
@@ -67,6 +81,7 @@ class AnalysisPanel(QWidget):
         j.sig_frf_done.connect(self._on_frf)
         j.sig_hysteresis_done.connect(self._on_hysteresis)
         j.sig_step_done.connect(self._on_step)
+        j.sig_identify_done.connect(self._on_identify)
         j.sig_logs_found.connect(self._on_logs_found)
         j.sig_failed.connect(self._on_failed)
         j.sig_cancelled.connect(self._on_cancelled)
@@ -108,6 +123,7 @@ class AnalysisPanel(QWidget):
         self.actions = a = ActionsBox()
         self.metrics_button, self.frf_button = a.metrics_button, a.frf_button
         self.hysteresis_button, self.step_button = a.hysteresis_button, a.step_button
+        self.identify_button = a.identify_button
         self.cancel_button, self.export_button = a.cancel_button, a.export_button
         self.status = a.status
 
@@ -117,8 +133,9 @@ class AnalysisPanel(QWidget):
         self.frf_plots = FrfPlots()
         self.hysteresis_plot = HysteresisPlot()
         self.step_plots = StepPlots()
+        self.identify_view = IdentifyView()
         for name, w in zip(TABS, (self.metrics_table, self.spectra, self.frf_plots,
-                                  self.hysteresis_plot, self.step_plots)):
+                                  self.hysteresis_plot, self.step_plots, self.identify_view)):
             self.tabs.addTab(w, name)
 
         lay = QVBoxLayout(self)
@@ -133,6 +150,9 @@ class AnalysisPanel(QWidget):
         self.frf_button.clicked.connect(self.run_frf)
         self.hysteresis_button.clicked.connect(self.run_hysteresis)
         self.step_button.clicked.connect(self.run_step)
+        self.identify_button.clicked.connect(lambda: self.run_identify())
+        self.identify_view.save_button.clicked.connect(self.save_testbed_dialog)
+        self.identify_view.open_button.clicked.connect(self.open_in_workbench)
         self.cancel_button.clicked.connect(self.cancel)
         a.export_metrics_csv.triggered.connect(lambda: self.export_table_dialog("metrics", "csv"))
         a.export_metrics_json.triggered.connect(lambda: self.export_table_dialog("metrics", "json"))
@@ -275,8 +295,47 @@ class AnalysisPanel(QWidget):
         return self._run("step", lambda paths, window, testbed: self.jobs.step(
             paths, start_s=window[0], stop_s=window[1]))
 
+    def run_identify(self, base: str | Path | None = None) -> bool:
+        """Identify the rig from the ticked logs, from the base testbed file `base` (None:
+        see _base_testbed).  The logs' window does not apply: the fit takes whole logs."""
+        paths = self._targets("identify")
+        if not paths:
+            return False
+        if self.jobs.busy("identify"):
+            self._say("Identify: still working on the last one", BAD_STYLE)
+            return False
+        base_path, how = self._base_testbed(base)
+        if base_path is None:
+            self._say("Identify: no base testbed chosen - choose one under Options (testbed) "
+                      "or in the dialog (a log's own file is never the base)", BAD_STYLE)
+            return False
+        if not self.jobs.identify(paths, base_path):
+            return False
+        self.identify_button.setEnabled(False)
+        self.identify_view.clear(f"identifying from {len(paths)} log(s), base {base_path.name} "
+                                 f"({how})…")
+        windowed = self.window_from.text().strip() or self.window_to.text().strip()
+        self._say(f"Identify: {len(paths)} log(s), base {base_path.name} ({how})…"
+                  + (" (whole logs: the window does not apply)" if windowed else ""), BUSY_STYLE)
+        self._update_cancel()
+        return True
+
+    def _base_testbed(self, base: str | Path | None) -> tuple[Path | None, str]:
+        """The base testbed file identify starts from and how it was chosen: the one given,
+        the one under Options, the session's, or one asked for (None: none chosen).  Never
+        the file a log recorded: on the simulated rig that is the very rig to be found."""
+        if base is not None:
+            return Path(base), "given"
+        if self.options.testbed_file():
+            return Path(self.options.testbed_file()), "chosen under Options"
+        if getattr(self.session, "testbed", None):
+            return Path(self.session.testbed), "the session's testbed"
+        path, _ = QFileDialog.getOpenFileName(self, "The base testbed file to identify from",
+                                              str(TESTBEDS_DIR), "Testbed files (*.toml)")
+        return (Path(path), "chosen in the dialog") if path else (None, "")
+
     def cancel(self) -> bool:
-        """Stop every analysis under way (metrics, FRF, hysteresis, step)."""
+        """Stop every analysis under way (metrics, FRF, hysteresis, step, identify)."""
         return bool([job for job in BATCH_JOBS if self.jobs.cancel(job)])
 
     def _update_cancel(self) -> None:
@@ -290,10 +349,17 @@ class AnalysisPanel(QWidget):
 
     # ------------------------------------------------------------------ results
     def _on_progress(self, job: str, done: int, total: int, text: str) -> None:
+        if job == "identify":                     # one fit of all the logs: no count
+            self._say(f"Identify: {text}…", BUSY_STYLE)
+            return
         self._say(f"{LABELS.get(job, job)}: {done}/{total} logs done - {text}…", BUSY_STYLE)
 
     def _on_failed(self, job: str, message: str) -> None:
         self._job_ended(job)
+        if job == "identify":                     # the pipeline's own words, nothing written
+            message += "; nothing written"
+            self.identify_view.clear(f"Identify failed: {message}")
+            self.tabs.setCurrentIndex(TABS.index("Identify"))
         self._say(f"{LABELS.get(job, job)} failed: {message}", BAD_STYLE)
 
     def _on_cancelled(self, job: str) -> None:
@@ -350,8 +416,67 @@ class AnalysisPanel(QWidget):
         if batch.failures:
             self.tabs.setCurrentIndex(TABS.index("Step"))
 
+    def _on_identify(self, result: IdentifyResult) -> None:
+        self._job_ended("identify")
+        self.identify_view.show_result(result)
+        self.tabs.setCurrentIndex(TABS.index("Identify"))
+        ident = result.identification
+        fitted = sum(1 for p in ident.provenance if p.status == "identified")
+        self._say(f"Identify: {fitted} parameter(s) identified from "
+                  f"{sum(u.used for u in ident.logs)} of {len(ident.logs)} log(s), base "
+                  f"{result.base_path.name}; Save testbed file… writes it", "")
+
     def _say(self, text: str, style: str = "") -> None:
         self.actions.say(text, style)
+
+    # ------------------------------------------------------------------ the identified file
+    def save_testbed(self, path: str | Path, name: str | None = None) -> bool:
+        """Write the identified testbed file shown in the Identify tab to `path`
+        (identification.testbed_file.write_identified: nothing that would not load)."""
+        if self.identify_view.result is None:
+            self._say("Save testbed file: nothing identified yet (tick the identification "
+                      "logs, then Identify)", BAD_STYLE)
+            return False
+        try:
+            written = self.identify_view.save(path, name)
+        except GroundStationError as exc:        # TestbedWriteError: the file's own words
+            self._say(f"Save testbed file: {exc}", BAD_STYLE)
+            return False
+        self._say(f"identified testbed file written to {written}", "")
+        return True
+
+    def _ask_testbed_path(self) -> str:
+        result = self.identify_view.result
+        if result is None:
+            return ""
+        near = result.used_logs[0].parent if result.used_logs else Path.cwd()
+        path, _ = QFileDialog.getSaveFileName(
+            self, "Save the identified testbed file",
+            str(near / f"{result.base_path.stem}_identified.toml"), "Testbed files (*.toml)")
+        return path + ".toml" if path and not Path(path).suffix else path
+
+    def save_testbed_dialog(self) -> bool:
+        path = self._ask_testbed_path()
+        return self.save_testbed(path) if path else False
+
+    def open_in_workbench(self) -> bool:
+        """Ask for the design workbench on the identified file (saved first if it is not)."""
+        view = self.identify_view
+        if view.result is None:
+            self._say("Open in design workbench: nothing identified yet", BAD_STYLE)
+            return False
+        if view.saved is None:
+            path = self._ask_testbed_path()
+            if not path:
+                self._say("Open in design workbench: save the identified testbed file first",
+                          BAD_STYLE)
+                return False
+            if not self.save_testbed(path):
+                return False
+        self.sig_open_workbench.emit(str(view.saved))
+        self._say(f"design workbench opened on {view.saved.name}: #1 a design on its base "
+                  f"testbed, #2 the same design on the identified one", "")
+        return True
 
     # ------------------------------------------------------------------ export
     def _table(self, which: str):

@@ -3,7 +3,9 @@ hysteresis loops and step responses, one curve (one colour) per log.  They draw 
 the analysis modules computed; the only arithmetic here is for display (units, dropping
 the 0 Hz bin a log axis cannot show, drawing the measured phase about the model's:
 model phase + arg(H / model), so a noisy bin can never put the rest of the curve a turn
-away).  `render_png` makes one image of a tab's plots for an export.
+away).  `render_png` makes one image of a tab's plots for an export.  The Identify tab
+(identify.py) builds its plots with the same helpers (analysis_plot, small_legend,
+caption_label, side_by_side, positive), so every tab of the dock looks alike.
 """
 
 from __future__ import annotations
@@ -32,14 +34,14 @@ def log_colour(index: int, style=Qt.PenStyle.SolidLine):
     return pg.mkPen(LOG_COLOURS[index % len(LOG_COLOURS)], width=1.5, style=style)
 
 
-def _legend(plot: pg.PlotWidget, offset) -> None:
+def small_legend(plot: pg.PlotWidget, offset) -> None:
     """A small legend in black on a pale ground (it may sit over a curve; log names are
     long and the plots narrow)."""
     plot.addLegend(offset=offset, labelTextColor="k", labelTextSize="7pt", verSpacing=-6,
                    brush=pg.mkBrush(255, 255, 255, 210), pen=pg.mkPen("#bdbdbd"))
 
 
-def _positive(x: np.ndarray, *ys: np.ndarray) -> np.ndarray:
+def positive(x: np.ndarray, *ys: np.ndarray) -> np.ndarray:
     """Where x and every y are finite and > 0 (what a log-log axis can show)."""
     ok = np.isfinite(x) & (x > 0)
     for y in ys:
@@ -47,7 +49,7 @@ def _positive(x: np.ndarray, *ys: np.ndarray) -> np.ndarray:
     return ok
 
 
-def _plot(left: str, bottom: str, *, logx: bool, logy: bool) -> pg.PlotWidget:
+def analysis_plot(left: str, bottom: str, *, logx: bool, logy: bool) -> pg.PlotWidget:
     """A plot named by its axis labels (no title: the dock is low)."""
     w = pg.PlotWidget()
     w.setBackground("w")
@@ -59,7 +61,7 @@ def _plot(left: str, bottom: str, *, logx: bool, logy: bool) -> pg.PlotWidget:
     return w
 
 
-def _caption_label() -> QLabel:
+def caption_label() -> QLabel:
     label = QLabel("")
     label.setWordWrap(True)
     label.setTextFormat(Qt.TextFormat.RichText)
@@ -68,7 +70,7 @@ def _caption_label() -> QLabel:
     return label
 
 
-def _side_by_side(widget: QWidget, caption: QLabel | None, plots, stretches) -> None:
+def side_by_side(widget: QWidget, caption: QLabel | None, plots, stretches) -> None:
     """The caption on top, the plots beside each other under it (a wide, low dock)."""
     lay = QVBoxLayout(widget)
     lay.setContentsMargins(0, 0, 0, 0)
@@ -95,13 +97,13 @@ class SpectraPlots(QWidget):
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        self.caption = _caption_label()
-        self.psd = _plot("PSD (µrad²/Hz)", "frequency (Hz)", logx=True, logy=True)
-        self.csp = _plot("CSP (µrad²)", "frequency (Hz)", logx=True, logy=False)
+        self.caption = caption_label()
+        self.psd = analysis_plot("PSD (µrad²/Hz)", "frequency (Hz)", logx=True, logy=True)
+        self.csp = analysis_plot("CSP (µrad²)", "frequency (Hz)", logx=True, logy=False)
         self.csp.setXLink(self.psd)
         # the legend where the CSP is low (it rises to the right)
-        _legend(self.csp, (10, 10))
-        _side_by_side(self, self.caption, (self.psd, self.csp), (1, 1))
+        small_legend(self.csp, (10, 10))
+        side_by_side(self, self.caption, (self.psd, self.csp), (1, 1))
         #: log name -> its curves (tests and the legend read them)
         self.psd_curves: dict[str, pg.PlotDataItem] = {}
         self.csp_curves: dict[str, pg.PlotDataItem] = {}
@@ -128,13 +130,13 @@ class SpectraPlots(QWidget):
             f = np.asarray(s.frequency_hz)
             p = np.asarray(s.density) * URAD ** 2
             c = np.asarray(s.csp) * URAD ** 2
-            ok = _positive(f, p)
+            ok = positive(f, p)
             if not np.any(ok):
                 flat.append(m.label)
             pen = log_colour(i)
             name = m.label                        # the log's name, or "live window (...)"
             self.psd_curves[name] = self.psd.plot(f[ok], p[ok], pen=pen)
-            ok = _positive(f) & np.isfinite(c)
+            ok = positive(f) & np.isfinite(c)
             self.csp_curves[name] = self.csp.plot(f[ok], c[ok], pen=pen, name=name)
         sensors = {m.sensor for m in results if m.spectrum is not None}
         sensor = sensors.pop() if len(sensors) == 1 else "the scored sensor"
@@ -152,16 +154,16 @@ class FrfPlots(QWidget):
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        self.caption = _caption_label()
-        self.magnitude = _plot("magnitude (dB)", "frequency (Hz)", logx=True, logy=False)
-        self.phase = _plot("phase (deg)", "frequency (Hz)", logx=True, logy=False)
-        self.coherence = _plot("coherence γ²", "frequency (Hz)", logx=True, logy=False)
+        self.caption = caption_label()
+        self.magnitude = analysis_plot("magnitude (dB)", "frequency (Hz)", logx=True, logy=False)
+        self.phase = analysis_plot("phase (deg)", "frequency (Hz)", logx=True, logy=False)
+        self.coherence = analysis_plot("coherence γ²", "frequency (Hz)", logx=True, logy=False)
         self.coherence.setYRange(0.0, 1.05)
         for p in (self.phase, self.coherence):
             p.setXLink(self.magnitude)
         # bottom left: the plant's magnitude falls with frequency
-        _legend(self.magnitude, (10, -10))
-        _side_by_side(self, self.caption, (self.magnitude, self.phase, self.coherence), (3, 3, 2))
+        small_legend(self.magnitude, (10, -10))
+        side_by_side(self, self.caption, (self.magnitude, self.phase, self.coherence), (3, 3, 2))
         #: log name -> {"magnitude", "phase", "coherence"} curves; the model's
         #: {"magnitude", "phase"} (tests read them)
         self.curves: dict[str, dict[str, pg.PlotDataItem]] = {}
@@ -190,7 +192,7 @@ class FrfPlots(QWidget):
         if with_model is not None:
             f = np.asarray(with_model.measured.freq_hz)
             h = np.asarray(with_model.model)
-            ok = _positive(f, np.abs(h))
+            ok = positive(f, np.abs(h))
             self.model["magnitude"] = self.magnitude.plot(
                 f[ok], 20.0 * np.log10(np.abs(h[ok])), pen=MODEL_PEN,
                 name=f"model {with_model.model_path}")
@@ -216,14 +218,14 @@ class FrfPlots(QWidget):
         m = res.measured
         f = np.asarray(m.freq_hz)
         mag, phase = m.magnitude_db, m.phase_deg
-        ok = _positive(f) & np.isfinite(mag)
+        ok = positive(f) & np.isfinite(mag)
         curves = {"magnitude": self.magnitude.plot(f[ok], mag[ok], pen=pen, name=name)}
         if res.model is not None:
             phase = _phase_about_model(f, np.asarray(m.response), np.asarray(res.model), phase)
-        pok = _positive(f) & np.isfinite(phase)
+        pok = positive(f) & np.isfinite(phase)
         curves["phase"] = self.phase.plot(f[pok], phase[pok], pen=pen)
         coh = np.asarray(m.coherence)
-        cok = _positive(f) & np.isfinite(coh)
+        cok = positive(f) & np.isfinite(coh)
         curves["coherence"] = self.coherence.plot(f[cok], coh[cok], pen=pen)
         self.curves[name] = curves
 
@@ -249,7 +251,7 @@ def _phase_about_model(f: np.ndarray, measured: np.ndarray, model: np.ndarray,
     after it by a turn; the difference to the model is small where the model is right,
     so no turn is ever lost.  Where the model is undefined the measured phase stays."""
     out = np.array(phase, dtype=float, copy=True)
-    usable = _positive(f, np.abs(model)) & np.isfinite(measured) & (np.abs(measured) > 0)
+    usable = positive(f, np.abs(model)) & np.isfinite(measured) & (np.abs(measured) > 0)
     if not np.any(usable):
         return out
     model_phase = np.full(len(f), np.nan)
@@ -265,12 +267,12 @@ class HysteresisPlot(QWidget):
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        self.caption = _caption_label()
+        self.caption = caption_label()
         self.caption.setAlignment(Qt.AlignmentFlag.AlignTop)
-        self.plot = _plot("friction torque (in-oz)", "angle (µrad)", logx=False, logy=False)
-        _legend(self.plot, (10, 10))
+        self.plot = analysis_plot("friction torque (in-oz)", "angle (µrad)", logx=False, logy=False)
+        small_legend(self.plot, (10, 10))
         # the loop wants room both ways: the caption beside it, not above
-        _side_by_side(self, None, (self.plot, self.caption), (3, 2))
+        side_by_side(self, None, (self.plot, self.caption), (3, 2))
         #: log name -> {"lead-in", "angle rising", "angle falling"} curves (tests read them)
         self.curves: dict[str, dict[str, pg.PlotDataItem]] = {}
         self.branches_drawn = 0
@@ -324,15 +326,15 @@ class StepPlots(QWidget):
 
     def __init__(self, parent: QWidget | None = None):
         super().__init__(parent)
-        self.caption = _caption_label()
-        self.plot = _plot("angle (µrad)", "time from the step (s)", logx=False, logy=False)
-        _legend(self.plot, (-10, -10))
+        self.caption = caption_label()
+        self.plot = analysis_plot("angle (µrad)", "time from the step (s)", logx=False, logy=False)
+        small_legend(self.plot, (-10, -10))
         self.plot.setClipToView(True)
         self.plot.setDownsampling(auto=True, mode="peak")
         self.table = FiguresTable(STEP_COLUMNS)
         self.table.setToolTip("rise 10-90 %, overshoot and settling (±2 %) against the commanded "
                               "step; steady-state error over the last 10 % of the record")
-        _side_by_side(self, self.caption, (self.plot, self.table), (3, 2))
+        side_by_side(self, self.caption, (self.plot, self.table), (3, 2))
         #: log name -> {"response", "reference"} curves (tests read them)
         self.curves: dict[str, dict[str, pg.PlotDataItem]] = {}
 
@@ -390,5 +392,6 @@ def render_png(plots: list[pg.PlotWidget], width: int = 900) -> bytes:
     return bytes(data.data())
 
 
-__all__ = ["FrfPlots", "HysteresisPlot", "SpectraPlots", "StepPlots", "log_colour",
-           "render_png"]
+__all__ = ["FrfPlots", "HysteresisPlot", "SpectraPlots", "StepPlots", "analysis_plot",
+           "caption_label", "log_colour", "positive", "render_png", "side_by_side",
+           "small_legend"]

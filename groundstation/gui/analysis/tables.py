@@ -1,6 +1,7 @@
-"""The Analysis dock's tables: the metrics of each log (LogMetrics.row()) and the step
-figures of each log (step_row).  A cell shows its value formatted and keeps the value
-itself (VALUE_ROLE), which is what an export writes - the table and its file agree."""
+"""The Analysis dock's tables: the metrics of each log (LogMetrics.row()), the step
+figures of each log (step_row) and the parameters of an identification (identify_row).
+A cell shows its value formatted and keeps the value itself (VALUE_ROLE), which is what
+an export writes - the table and its file agree."""
 
 from __future__ import annotations
 
@@ -25,6 +26,10 @@ STEP_COLUMNS = (("log", "log", ""), ("at s", "step_time_s", ".3f"),
                 ("steady err. %", "steady_state_error_pct", ".3g"),
                 ("peak effort", "peak_effort", ".3g"), ("effort", "effort", ""),
                 ("note", "notes", ""))
+#: the identification's parameters: header, identify_row() key, format
+IDENTIFY_COLUMNS = (("parameter", "name", ""), ("units", "units", ""), ("base", "base", ".6g"),
+                    ("identified", "value", ".6g"), ("change %", "change_pct", "+.2f"),
+                    ("95 % interval", "interval", ""), ("status", "status", ""))
 VALUE_ROLE = Qt.ItemDataRole.UserRole
 
 
@@ -50,6 +55,20 @@ def step_row(step) -> dict[str, Any]:
         "effort": f"{step.effort_channel} ({step.effort_units})" if step.effort_channel else "",
         "notes": "; ".join(notes),
     }
+
+
+def identify_row(row: dict[str, Any]) -> dict[str, Any]:
+    """A row of identification.report.parameter_rows with its 95 % interval as the text
+    the table shows ('' for a held parameter: its status says why it has none)."""
+    ci = row.get("ci95")
+    interval = f"[{ci[0]:.6g}, {ci[1]:.6g}]" if ci else ""
+    return {**row, "interval": interval}
+
+
+def held(row: dict[str, Any]) -> bool:
+    """A parameter the fit did not change (held at the base value, or fitted and not
+    written): anything but 'identified'."""
+    return row.get("status") != "identified"
 
 
 def _cell(value, fmt: str) -> QTableWidgetItem:
@@ -162,5 +181,5 @@ class FiguresTable(QTableWidget):
                 for c in range(self.columnCount())]
 
 
-__all__ = ["FiguresTable", "METRIC_COLUMNS", "ResultTable", "STEP_COLUMNS", "VALUE_ROLE",
-           "step_row"]
+__all__ = ["FiguresTable", "IDENTIFY_COLUMNS", "METRIC_COLUMNS", "ResultTable", "STEP_COLUMNS",
+           "VALUE_ROLE", "held", "identify_row", "step_row"]

@@ -11,6 +11,12 @@ put on a second screen while the dock stays where it is, and the main window's s
 dock layout does not change.  It is a child of the Parameters dock, so it closes with
 the main window and is disabled with the dock while a campaign runs.
 
+`open_on_testbed` opens it on another testbed file of a design's kind - an identified
+rig, from the Analysis dock's Identify tab: #1 the design on the testbed it names, #2
+the same design on that file (judged on it as the upload gate judges it,
+params/upload_path.judged_on), so every view compares the two plants under one
+controller.
+
 Each edit recomputes on the GUI thread what takes milliseconds - the frequency views,
 T_I(0), the alignment at the report's frequencies, the PQ crossovers - and asks the
 worker (design_workbench_jobs) for what takes tens: the validation's margins and
@@ -32,14 +38,18 @@ from PySide6.QtWidgets import (QFileDialog, QHBoxLayout, QLabel, QPushButton, QS
 
 from ...core.dictionary import Dictionary
 from ...core.errors import GroundStationError
-from ...params.design_file import ControllerDesign
+from ...params.design_file import ControllerDesign, load_design
+from ...params.tf_algebra import DesignError
+from ...params.upload_path import judged_on
+from ...plant.testbed import PROFILES_DIR, Testbed, load_testbed
 from .editor import FactorEditor
 from .jobs import SlowJobs
 from .model import SLOTS, WorkbenchModel, fast_views
 from .plots import DESIGN_COLOURS, WorkbenchPlots
 
 STALE = QBrush(QColor(150, 150, 150))
-ROWS = (("design", "design"), ("file", "file"), ("state", "state"), ("c0", "c0"),
+ROWS = (("design", "design"), ("file", "file"), ("testbed", "testbed"), ("state", "state"),
+        ("c0", "c0"),
         ("dc", "T_I(0) [[u1 ← d1, u1 ← d2], [u2 ← d1, u2 ← d2]]"),
         ("phi_1", "φ at 1 Hz"), ("phi_5", "φ at 5 Hz"), ("phi_14", "φ at 14 Hz"),
         ("phi_22", "φ at 22 Hz"), ("pq_cross", "|PQ| = 1 at (∠PQ)"),
@@ -49,6 +59,25 @@ ROWS = (("design", "design"), ("file", "file"), ("state", "state"), ("c0", "c0")
         ("times", "recompute: views / margins+responses"))
 SLOW_ROWS = ("verdict", "margins", "inner", "outer", "dist", "step")
 ROW = {key: i for i, (key, _) in enumerate(ROWS)}
+CONTROLLERS_DIR = PROFILES_DIR / "controllers"
+
+
+def _kind(testbed: Testbed) -> tuple[str, str]:
+    return testbed.configuration, str(testbed.setup)
+
+
+def shipped_design_for(testbed: Testbed) -> ControllerDesign:
+    """The first shipped 2-DOF design (by file name) made for a testbed of `testbed`'s
+    kind; DesignError when there is none (a 1-DOF rig has no PQ views)."""
+    for path in sorted(CONTROLLERS_DIR.glob("*.toml")):
+        try:
+            design = load_design(path)
+        except GroundStationError:
+            continue                              # a file the workbench could not open anyway
+        if design.testbed.is_2dof and _kind(design.testbed) == _kind(testbed):
+            return design
+    raise DesignError(f"no shipped 2-DOF design for a {testbed.configuration} {testbed.setup} "
+                      f"testbed ({testbed.path.name}): the workbench's PQ views need two inputs")
 
 
 def margins_text(m) -> str:
@@ -175,6 +204,24 @@ class DesignWorkbench(QWidget):
                   + (f" - c0 kept output-equivalent to {slot.reference.name}" if slot.reference else ""))
         self.select(index)
         self._refresh(index)
+        return True
+
+    def open_on_testbed(self, testbed: str | Path, design: ControllerDesign | None = None) -> bool:
+        """#1 `design` on the testbed it names, #2 the same design on the testbed file
+        `testbed` (an identified rig).  `design` None, or one for another kind of rig: the
+        first shipped design for the file's kind."""
+        try:
+            rig = load_testbed(testbed)
+            if design is None or not design.testbed.is_2dof or _kind(design.testbed) != _kind(rig):
+                design = shipped_design_for(rig)
+            on_rig = judged_on(design, rig)
+        except GroundStationError as exc:
+            self._say(f"cannot open on {Path(testbed).name}: {exc}", bad=True)
+            return False
+        if not (self.open_design(0, design) and self.open_design(1, on_rig)):
+            return False
+        self._say(f"{design.name}: #1 on {design.testbed.path.name} (the testbed it names), "
+                  f"#2 on {rig.path.name}")
         return True
 
     def close_design(self, index: int) -> None:
@@ -342,6 +389,8 @@ class DesignWorkbench(QWidget):
             state = f"saved as {slot.saved_path.name}"
         self._cell("design", index, slot.name)
         self._cell("file", index, slot.original.path.name, tip=str(slot.original.path))
+        testbed = slot.original.testbed.path
+        self._cell("testbed", index, testbed.name, tip=str(testbed))
         self._cell("state", index, state)
 
     def _fill_fast(self, index: int, fast) -> None:
