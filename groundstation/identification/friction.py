@@ -37,7 +37,7 @@ from pathlib import Path
 from typing import Sequence
 
 import numpy as np
-from scipy import stats
+from scipy import signal, stats
 
 from ..analysis.friction_id import FrictionIdError, combine_tables, identify_friction
 from ..analysis.friction_velocity import CoulombViscousFit, coulomb_viscous_fit
@@ -92,15 +92,42 @@ class FrictionFit:
 
     def loop_curves(self) -> list[LoopCurves]:
         """Each loop's measured torque and both models' along its measured angle (each
-        model starting from the measured torque, moving the way the record first moves)."""
+        model starting from the measured torque, moving the way the record first moves).
+
+        The models are driven by the angle low-passed without phase shift: the encoder's
+        noise is a reversal every few samples, and each reversal restarts a Dahl branch at
+        its steepest slope, which drags the model's torque behind by about a tenth of T_c
+        (measured on the twin) - the noise is the encoder's, not the bearing's motion."""
         out = []
         for lh in self.loops:
             angle, torque = lh.loop.angle_rad, lh.loop.torque_in_oz
-            first = int(np.sign(angle[min(angle.size - 1, lh.loop.lead_in.stop)] - angle[0]))
-            curves = [simulate_friction(angle, p, initial_direction=first, T0=float(torque[0]))
-                      for p in (self.base_params, self.identified_params)]
+            motion = _smooth_angle(angle, lh.frames / max(lh.window_to_s - lh.window_from_s, 1e-9))
+            # from the first reversal on: before it the bearing's friction state is unknown
+            # (what the closed loop left it in), and a model started there would carry that
+            # guess through its memory of the later branches
+            k = int(lh.loop.reversal_indices[0])
+            direction = lh.loop.branches[0].direction
+            curves = []
+            for p in (self.base_params, self.identified_params):
+                model = np.full(angle.size, np.nan)
+                t0 = float(np.clip(torque[k], -p.T_c, p.T_c))
+                model[k:] = simulate_friction(motion[k:], p, initial_direction=direction, T0=t0)
+                curves.append(model)
             out.append(LoopCurves(lh.path.name, angle, torque, *curves))
         return out
+
+
+#: the model's angle is low-passed here (Hz): far above a friction test's triangle
+#: (0.001-0.01 deg/s over +-0.01-0.05 deg: periods of tens of seconds), far below the
+#: encoder noise's band
+MOTION_CUTOFF_HZ = 2.0
+
+
+def _smooth_angle(angle: np.ndarray, rate_hz: float) -> np.ndarray:
+    if angle.size < 20 or not rate_hz > 4 * MOTION_CUTOFF_HZ:
+        return angle
+    sos = signal.butter(2, MOTION_CUTOFF_HZ, fs=rate_hz, output="sos")
+    return signal.sosfiltfilt(sos, angle)
 
 
 def friction_params(tb: Testbed, *, coulomb: float | None = None, sigma: float | None = None,
