@@ -58,7 +58,7 @@ def notes_text(result: IdentifyResult) -> str:
     """What each log served for, then the identification's notes."""
     lines = []
     for u in result.identification.logs:
-        what = ("friction: a position profile" if getattr(u, "purpose", "plant") == "friction"
+        what = ("friction: a position profile" if u.purpose == "friction"
                 else f"{u.input_channel}, {u.current_rms_a:.3g} A RMS" if u.input_channel else "")
         lines.append(f"{'used' if u.used else 'not used'}: {u.path.name}"
                      + (f" ({what})" if what else "") + (f" - {u.note}" if u.note else ""))
@@ -235,15 +235,12 @@ class IdentifyView(QWidget):
         if self.result is None:
             raise ValueError("nothing identified to save")
         ident = self.result.identification
-        # an identified slope table goes beside the file, when the identification has one
-        # (the friction logs' fit); without one the file points at the base's table
-        extra = {}
-        table = getattr(ident, "slope_table", None)
-        if table is not None:
-            extra["slope_table"] = table
+        # the friction logs' slope table, when there were any, goes beside the file; without
+        # one the file points at the base's table
         testbed = write_identified(ident.base, ident.written, ident.provenance, path,
                                    name=name or f"{ident.base.name} (identified)",
-                                   logs=[p.name for p in self.result.used_logs], **extra)
+                                   logs=[p.name for p in self.result.used_logs],
+                                   slope_table=ident.slope_table)
         self.saved = testbed.path
         self.summary.setText(f"{summary_line(self.result)}; saved as {testbed.path.name}")
         return testbed.path
