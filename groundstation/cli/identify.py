@@ -35,6 +35,10 @@ def add_parsers(sub: argparse._SubParsersAction) -> None:
                                                 "(default: the base's name + ' (identified)')")
     s.add_argument("--band", nargs=2, type=arguments.positive, metavar=("LOW", "HIGH"),
                    default=None, help="the frequency band fitted, Hz (default 15 300)")
+    s.add_argument("--no-twin-correction", action="store_true",
+                   help="do not measure the plant fit's bias on a twin of the identified rig "
+                        "(the bias the Dahl friction gives a linear fit, 0.5-1 %% on the "
+                        "reference's rig; see docs/identification.md)")
     s.add_argument("--min-coherence", type=arguments.fraction, default=0.9,
                    help="bins below this coherence are not fitted (default 0.9)")
     s.add_argument("--json", default=None, metavar="FILE",
@@ -112,7 +116,8 @@ def _cmd_identify(args) -> int:
         if not band[0] < band[1]:
             print(f"error: --band {band[0]:g} {band[1]:g}: LOW must be below HIGH", file=sys.stderr)
             return EXIT_BAD_INPUT
-        result = identify(paths, args.testbed, band_hz=band, min_coherence=args.min_coherence)
+        result = identify(paths, args.testbed, band_hz=band, min_coherence=args.min_coherence,
+                          twin_correction=not args.no_twin_correction)
     except IdentificationError as exc:
         print(f"error: {exc}; nothing written", file=sys.stderr)
         return EXIT_FAILED

@@ -39,6 +39,7 @@ from ..core.errors import GroundStationError
 from ..logs.reader import LogReader
 from ..plant.testbed import Testbed, load_testbed
 from .friction import FrictionFit, identify_friction_logs
+from .twin_bias import corrected_fit
 from .testbed_file import Provenance
 
 #: below this RMS current (A) the bearing sticks: the log does not serve the plant fit
@@ -158,8 +159,9 @@ def _written(fit: PlantFit) -> tuple[dict[str, float], list[Provenance], list[st
     written, provenance, notes = {}, [], []
     for p in fit.parameters:
         if p.name in EFFECTIVE_ONLY and p.status == "identified":
-            what = ("the bearing's effective damping at this excitation (viscous b_f plus "
-                    "the Coulomb friction's equivalent)" if p.name == "mechanics.bearing_viscous"
+            what = ("the bearing's damping seen by the frequency responses (with the twin "
+                    "correction, b_f itself if the twin's friction is the rig's; without, b_f "
+                    "plus the Coulomb friction's equivalent)" if p.name == "mechanics.bearing_viscous"
                     else "the bearing friction's linearised stiffness at this excitation")
             notes.append(f"{p.name}: {p.value:.4g} {p.units} fitted as {what}; not written "
                          f"(the base value stays)")
@@ -192,11 +194,35 @@ def _with_friction(written: dict[str, float], provenance: list[Provenance], note
     notes += friction.notes
 
 
+def _twin_corrected(fit: PlantFit, base: Testbed, responses, serving: Sequence[LogUse],
+                    friction: FrictionFit | None) -> tuple[PlantFit, list[str]]:
+    """The fit corrected on a twin with the rig's friction: the identified one, else the
+    base file's (said in a note).  The twin's b_f is the friction's, never the fit's
+    effective damping, which stands for b_f and the Coulomb friction together."""
+    values = {"mechanics.bearing_viscous": float(base.mechanics["bearing_viscous"]),
+              "friction.coulomb_torque": float(base.friction["coulomb_torque"])}
+    notes = []
+    if friction is not None:
+        values.update(friction.written)
+    else:
+        notes.append("the twin that measured the fit's bias has the base file's friction (no "
+                     "friction log given): the correction is as good as that friction")
+    try:
+        fit, more = corrected_fit(fit, responses, [(u.path, u.input_channel) for u in serving],
+                                  values, None if friction is None or friction.slope_table is None
+                                  else friction.slope_table[:2])
+    except GroundStationError as exc:
+        return fit, [f"the fit's bias could not be measured on the twin ({exc}): not corrected"]
+    return fit, notes + more
+
+
 def identify(paths: Sequence[str | Path], base_path: str | Path, *,
              band_hz: tuple[float, float] = DEFAULT_BAND_HZ,
-             min_coherence: float = 0.9) -> Identification:
+             min_coherence: float = 0.9, twin_correction: bool = True) -> Identification:
     """Identify the rig that recorded `paths`, starting from `base_path`: the plant from
-    its open-loop current logs, then its friction from its position-profile logs."""
+    its open-loop current logs, then its friction from its position-profile logs, then
+    (`twin_correction`) the plant fit's bias measured on a twin of the result and taken
+    out (twin_bias.py)."""
     base = load_testbed(base_path)
     if not paths:
         raise IdentificationError("no logs given: record the open_loop_sysid campaign on "
@@ -221,10 +247,13 @@ def identify(paths: Sequence[str | Path], base_path: str | Path, *,
                         min_coherence=min_coherence)
     except GroundStationError as exc:
         raise IdentificationError(f"the plant fit failed: {exc}") from None
-    written, provenance, notes = _written(fit)
     friction = identify_friction_logs([u.path for u in uses if u.used and u.purpose == "friction"],
                                       base, fit.testbed)
+    twin_notes: list[str] = []
+    if twin_correction:
+        fit, twin_notes = _twin_corrected(fit, base, responses, serving, friction)
+    written, provenance, notes = _written(fit)
     _with_friction(written, provenance, notes, friction)
-    notes += fit.messages
+    notes += fit.messages + tuple(twin_notes)
     return Identification(base, fit, tuple(uses), tuple(responses), written,
                           tuple(provenance), tuple(notes), friction)

@@ -119,6 +119,14 @@ def friction_logs(hidden: Path, folder: Path) -> list[Path]:
     return logs
 
 
+def standard_deviation(row: dict) -> float:
+    """The estimate's standard deviation from its 95 % interval (symmetric in the value's
+    own units for an offset, in its logarithm for the others: the half-width is the same
+    to first order)."""
+    lo, hi = row["ci95"]
+    return (hi - lo) / (2 * 1.959964)
+
+
 def test_identify_finds_the_hidden_rig_and_writes_a_file_that_loads(rig, capsys):
     out = rig["folder"] / "my_rig.toml"
     report = rig["folder"] / "identify.json"
@@ -136,6 +144,11 @@ def test_identify_finds_the_hidden_rig_and_writes_a_file_that_loads(rig, capsys)
         row = figures[name]
         assert row["status"] == "identified", row
         assert row["value"] == pytest.approx(truth, rel=0.03), row
+        # the fit's bias measured on a twin of the result and taken out, the error is the
+        # noise the interval states (without the correction J2, k, b and K_t2 were
+        # 0.6-0.7 % off with intervals of +-0.1 %).  Asserted at 3.29 sd (99.9 %): with
+        # a dozen parameters checked, one outside its 95 % interval is to be expected
+        assert abs(row["value"] - truth) <= 3.29 * standard_deviation(row), row
         assert getattr(identified, section)[key] == pytest.approx(row["value"], rel=1e-6)
     # what was not moved comes back close to the reference's value
     assert figures["mechanics.J1" if "mechanics.J1" not in rig["factors"] else "mechanics.J2"][
@@ -232,9 +245,9 @@ DESIGNS = {"relative": ("relative_design2.toml", "RELATIVE"),
 
 def test_a_campaign_runs_on_the_identified_rig(rig, capsys, monkeypatch):
     """A shipped design, judged by the upload gate on the identified plant, holds the
-    LOS.  The relative design's gain margin falls from 29.1 dB to 6.2 dB there, just above
-    the gate's 6 dB (the hidden rig's bearing damps 1.5x more); the inertial design's
-    phase margin is 14 deg, below the gate's, and it is sent with the risk accepted."""
+    LOS.  Both are marginal there: the relative design's gain margin falls from 29.1 dB
+    to 5.9 dB (as on the hidden rig itself), the inertial design's phase margin is 14
+    deg; the campaign accepts the risk, and the gate records that it did."""
     out = rig["folder"] / "campaign_rig.toml"
     assert main(["identify", *map(str, rig["logs"]), "--testbed", str(rig["base"]),
                  "--out", str(out)]) == 0
@@ -250,7 +263,7 @@ def test_a_campaign_runs_on_the_identified_rig(rig, capsys, monkeypatch):
     assert "COMPLETED - 7 step(s) done, 1 run(s) complete" in text
     # the upload gate judged the design on the identified plant, not the one it names
     assert f"{design}: validated on this session's testbed campaign_rig.toml" in text
-    assert ("margins accepted" in text) == (mode == "INERTIAL")
+    assert "margins accepted" in text
 
 
 @pytest.mark.parametrize("rig", ["relative"], indirect=True)
@@ -270,3 +283,22 @@ def test_the_identified_friction_model_retraces_the_measured_loops(rig):
         identified = np.sqrt(np.mean((c.identified_in_oz[drawn] - c.measured_in_oz[drawn]) ** 2))
         base = np.sqrt(np.mean((c.base_in_oz[drawn] - c.measured_in_oz[drawn]) ** 2))
         assert identified < 0.01 * t_c < 0.03 * t_c < base, (identified, base)
+
+
+@pytest.mark.parametrize("rig", ["relative"], indirect=True)
+def test_the_twin_correction_takes_out_the_linear_fit_s_friction_bias(rig, capsys):
+    """Without the twin, the Dahl friction the linear fit cannot hold biases the flexure
+    by about 0.7 %, several of its standard deviations; with it the error is noise."""
+    rows = {}
+    for flag in ([], ["--no-twin-correction"]):
+        report = rig["folder"] / f"twin{len(flag)}.json"
+        assert main(["identify", *map(str, rig["logs"]), "--testbed", str(rig["base"]),
+                     "--json", str(report), *flag]) == 0
+        rows[bool(flag)] = {p["name"]: p for p in json.loads(report.read_text())["parameters"]}
+    text = capsys.readouterr().out
+    assert "mechanics.flexure_stiffness: +0." in text and "bias taken out" in text
+    truth = rig["hidden"].mechanics["flexure_stiffness"]
+    plain, corrected = rows[True]["mechanics.flexure_stiffness"], rows[False]["mechanics.flexure_stiffness"]
+    assert abs(plain["value"] - truth) > 3.29 * standard_deviation(plain)
+    assert abs(corrected["value"] - truth) <= 3.29 * standard_deviation(corrected)
+    assert abs(corrected["value"] / truth - 1) < 0.25 * abs(plain["value"] / truth - 1)
