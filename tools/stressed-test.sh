@@ -16,10 +16,12 @@ if ! command -v stress-ng >/dev/null 2>&1; then
     exit 2
   fi
 fi
-# the load in a session of its own, so the trap below stops all of it and nothing else
-setsid stress-ng --cpu "$CPU_LOAD" --quiet &
+# stress-ng's own process stops its workers on SIGTERM.  (It used to run under setsid and
+# be stopped as a process group: when setsid had to fork, $! was setsid's pid, not the
+# group's, and a failed run left the load burning after the script had exited.)
+stress-ng --cpu "$CPU_LOAD" --quiet &
 LOAD_PID=$!
-trap 'kill -TERM -- -"$LOAD_PID" 2>/dev/null || true' EXIT INT TERM
+trap 'kill -TERM "$LOAD_PID" 2>/dev/null || true; wait "$LOAD_PID" 2>/dev/null || true' EXIT INT TERM
 i=1
 while [ "$i" -le "$RUNS" ]; do
   start=$(date +%s)
