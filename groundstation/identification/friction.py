@@ -241,14 +241,44 @@ def _table(base: Testbed, loops: Sequence[LogHysteresis], coulomb: float,
     sd0 = (float(np.std(per_branch, ddof=1) / math.sqrt(per_branch.size))
            if per_branch.size > 1 else None)
     t0 = _t95(per_branch.size - 1)
-    start = ParameterEstimate(".".join(TABLE_START[:2]), "", base_f0, float(f[0]),
-                              None if sd0 is None else (f[0] - t0 * sd0, f[0] + t0 * sd0),
-                              "identified", f"{int(identified.sum())} of {x.size} table points "
-                              f"from data, the rest filled", tuple(names))
     held_sigma = _estimate(base, SIGMA, sigma, None, (), status="held (scale)",
                            reason="with a data-based table only sigma*f(x) is measured: the "
                                   "table carries the product")
+    why_not = _table_not_determined(x, identified, f[0], None if sd0 is None else t0 * sd0)
+    if why_not:
+        notes.append(f"slope table not written: {why_not}; the base table stays")
+        return None, [held_sigma, ParameterEstimate(
+            ".".join(TABLE_START[:2]), "", base_f0, base_f0, None, "held (not determined)",
+            why_not, tuple(names))], None
+    start = ParameterEstimate(".".join(TABLE_START[:2]), "", base_f0, float(f[0]),
+                              (f[0] - t0 * sd0, f[0] + t0 * sd0),
+                              "identified", f"{int(identified.sum())} of {x.size} table points "
+                              f"from data, the rest filled", tuple(names))
     return (x, f, identified), [held_sigma, start], None
+
+
+#: a table is written only when its turnaround slope f(0) is known to this fraction (95 %)
+#: and the data reach this far along the branch: a loop cut short (a triangle stopped
+#: before its turnarounds, or one inside the presliding range) leaves a table that is
+#: mostly fill, and its f(0) from two or three branches is noise
+MAX_TABLE_START_SPREAD = 0.2
+MIN_TABLE_REACH_X = 1.0
+
+
+def _table_not_determined(x: np.ndarray, identified: np.ndarray, f0: float,
+                          half_width: float | None) -> str:
+    """Why the identified table is not good enough to write ('' if it is)."""
+    if half_width is None:
+        return "f(0) from a single branch: record whole cycles of the triangle"
+    if not half_width <= MAX_TABLE_START_SPREAD * abs(f0):
+        return (f"f(0) = {f0:.3g} is known only to +-{half_width:.2g} (95 %), more than "
+                f"{MAX_TABLE_START_SPREAD:.0%}: record more or longer triangle cycles")
+    reach = float(np.max(x[identified])) if np.any(identified) else 0.0
+    if reach < MIN_TABLE_REACH_X:
+        return (f"the loops' branches reach x = {reach:.2g} of the table's 0..2 (at least "
+                f"{MIN_TABLE_REACH_X:g} is needed): use a triangle amplitude beyond the "
+                f"presliding range (T_c/sigma)")
+    return ""
 
 
 def identify_friction_logs(paths: Sequence[Path], base: Testbed, plant: Testbed) -> FrictionFit | None:
