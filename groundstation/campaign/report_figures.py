@@ -15,12 +15,12 @@ a worker thread of the GUI does not touch its state.
 from __future__ import annotations
 
 import base64
-import html
 import io
 import math
 from pathlib import Path
 from typing import Any, Callable
 
+from ..core.html_page import BASE_STYLE, cell, escaped
 from .comparison import COMPARED
 from .metrics import CampaignMetrics
 from .metrics_words import (describe, group_text, mode_sentence, num, pct, row_valid,
@@ -132,24 +132,10 @@ def _chart(panels: list[tuple[str, str, list[tuple[str, list[float | str | None]
 
 
 # ---------------------------------------------------------------------- the page
-_STYLE = """
-body { font-family: sans-serif; margin: 1.5em; color: #222; }
-table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.85em; }
-th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; }
-th { background: #eee; } td.text { text-align: left; }
+_STYLE = BASE_STYLE + """
 tr.baseline td { background: #f4f8ff; } tr.error td { background: #fff0f0; }
 tr.invalid td { background: #fff8e0; color: #666; }
-img { max-width: 100%; display: block; margin: 0.5em 0 1.5em; }
-pre { background: #f6f6f6; padding: 0.5em; white-space: pre-wrap; }
 """
-
-
-def _e(v: Any) -> str:
-    return html.escape("" if v is None else str(v))
-
-
-def _td(v: Any, text: bool = False) -> str:
-    return f'<td class="text">{_e(v)}</td>' if text else f"<td>{_e(v)}</td>"
 
 
 def html_page(metrics: CampaignMetrics, report: CampaignReport, figures: dict[str, bytes],
@@ -163,14 +149,14 @@ def html_page(metrics: CampaignMetrics, report: CampaignReport, figures: dict[st
     status = (f"{report.status}: {len(report.completed_runs)} run(s) complete, "
               f"{len(report.failed_runs)} failed; {len(metrics.rows)} log(s) scored")
     out = ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
-           f"<title>campaign {_e(metrics.campaign)}: metrics</title>",
+           f"<title>campaign {escaped(metrics.campaign)}: metrics</title>",
            f"<style>{_STYLE}</style></head><body>",
-           f"<h1>Campaign {_e(metrics.campaign)}</h1>",
-           f"<p>{_e(status)}<br>campaign file {_e(report.file)}<br>{_e(metrics.window_text())}</p>"]
+           f"<h1>Campaign {escaped(metrics.campaign)}</h1>",
+           f"<p>{escaped(status)}<br>campaign file {escaped(report.file)}<br>{escaped(metrics.window_text())}</p>"]
     if metrics.compared:
         title = f"Comparison of {a.compare}" + (f" by {a.group_by}" if a.group_by else "")
-        out.append(f"<h2>{_e(title)}</h2>")
-        out.append(f"<p>relative to {_e(metrics.baseline_label())} in each group</p>")
+        out.append(f"<h2>{escaped(title)}</h2>")
+        out.append(f"<p>relative to {escaped(metrics.baseline_label())} in each group</p>")
         out.append(_comparison_table(metrics))
         sentences = [validity_sentence(c, metrics.baseline_label(), group_text(a, c["group"], under=True))
                      or ("" if c["baseline"] else
@@ -179,22 +165,22 @@ def html_page(metrics: CampaignMetrics, report: CampaignReport, figures: dict[st
         sentences += [mode_sentence(c, group_text(a, c["group"], under=True)) for c in metrics.comparison]
         sentences = [s for s in sentences if s]
         if sentences:
-            out.append("<ul>" + "".join(f"<li>{_e(s)}</li>" for s in sentences) + "</ul>")
+            out.append("<ul>" + "".join(f"<li>{escaped(s)}</li>" for s in sentences) + "</ul>")
     if figures:
         out.append("<h2>Figures</h2>")
         for name, png in figures.items():
             data = base64.b64encode(png).decode("ascii")
-            out.append(f"<h3>{_e(FIGURE_TITLES.get(name, name))}</h3>"
-                       f'<img alt="{_e(FIGURE_TITLES.get(name, name))}" src="data:image/png;base64,{data}">')
+            out.append(f"<h3>{escaped(FIGURE_TITLES.get(name, name))}</h3>"
+                       f'<img alt="{escaped(FIGURE_TITLES.get(name, name))}" src="data:image/png;base64,{data}">')
     section = html_section(metrics, reference or {})
     if section:
         out.append(section)
     out.append("<h2>Every log</h2>")
     out.append(_rows_table(metrics))
     if metrics.notes:
-        out.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_e(n)}</li>" for n in metrics.notes) + "</ul>")
+        out.append("<h2>Notes</h2><ul>" + "".join(f"<li>{escaped(n)}</li>" for n in metrics.notes) + "</ul>")
     out.append("<h2>Report</h2>")
-    out.append(f"<pre>{_e(report.summary())}\n\n{_e(metrics.text())}</pre>")
+    out.append(f"<pre>{escaped(report.summary())}\n\n{escaped(metrics.text())}</pre>")
     out.append("</body></html>")
     return "\n".join(out) + "\n"
 
@@ -205,19 +191,19 @@ def _comparison_table(metrics: CampaignMetrics) -> str:
     for what, unit in COMPARED.values():
         head += [f"{what} ({unit.replace('urad', 'µrad')})", "vs baseline"]
     head += ["window (s)", "note"]
-    lines = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
+    lines = ["<table><tr>" + "".join(f"<th>{escaped(h)}</th>" for h in head) + "</tr>"]
     for c in metrics.comparison:
         cls = (' class="error"' if c["error"] else
                ' class="invalid"' if c["note"] != "no log" and not c["valid"] else
                ' class="baseline"' if c["baseline"] else "")
-        cells = [_td(c["group"], True), _td(c["compare"], True), _td(c["run"])]
+        cells = [cell(c["group"], True), cell(c["compare"], True), cell(c["run"])]
         for key in COMPARED:
-            cells.append(_td(num(c[key])))
-            cells.append(_td("baseline" if c["baseline"] else
+            cells.append(cell(num(c[key])))
+            cells.append(cell("baseline" if c["baseline"] else
                              f"{pct(c[f'{key}_change_pct'])} (x{num(c[f'{key}_ratio'])})"
                              if c[f"{key}_ratio"] is not None else "n/a"))
-        cells.append(_td(num(c["window_s"])))
-        cells.append(_td(c["error"] or c["note"], True))
+        cells.append(cell(num(c["window_s"])))
+        cells.append(cell(c["error"] or c["note"], True))
         lines.append(f"<tr{cls}>" + "".join(cells) + "</tr>")
     lines.append("</table>")
     return "\n".join(lines)
@@ -235,12 +221,12 @@ _ROW_FIGURES = [("from_s", "from (s)"), ("to_s", "to (s)"), ("frames", "frames")
 
 def _rows_table(metrics: CampaignMetrics) -> str:
     head = ["run", "status", "matrix", "log", "window"] + [h for _, h in _ROW_FIGURES] + ["notes / error"]
-    lines = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
+    lines = ["<table><tr>" + "".join(f"<th>{escaped(h)}</th>" for h in head) + "</tr>"]
     for r in metrics.rows:
         w = r["window"]
         start = f"mark '{w['mark']}'" if w["start"] == "mark" else w["start"]
-        cells = [_td(r["run"]), _td(r["run_status"], True), _td(describe(r["variables"]), True),
-                 _td(Path(r["file"]).name, True), _td(start, True)]
+        cells = [cell(r["run"]), cell(r["run_status"], True), cell(describe(r["variables"]), True),
+                 cell(Path(r["file"]).name, True), cell(start, True)]
         shown = dict(r["metrics"])
         if isinstance(shown.get("excluded_fraction"), float):
             shown["excluded_pct"] = 100.0 * shown["excluded_fraction"]
@@ -249,14 +235,14 @@ def _rows_table(metrics: CampaignMetrics) -> str:
             shown["mode_share_pct"] = 100.0 * shown["mode_share"]
             lo, hi = shown["mode_band_hz"]
             shown["mode_band"] = f"{lo:.3g}-{hi:.3g}" + (" DOMINATES" if shown.get("mode_dominates") else "")
-        cells += [_td(num(shown.get(k)) if isinstance(shown.get(k), float)
+        cells += [cell(num(shown.get(k)) if isinstance(shown.get(k), float)
                       else shown.get(k)) for k, _ in _ROW_FIGURES]
         said = [("ERROR " + r["error"]) if r["error"] else
                 "; ".join(x for x in [r["notes"], "" if row_valid(r) else
                                       "not valid: " + str(r["metrics"].get("invalid_reason", ""))] if x)]
         if r.get("reference_error"):
             said.append("reference metric: " + r["reference_error"])
-        cells.append(_td("; ".join(x for x in said if x), True))
+        cells.append(cell("; ".join(x for x in said if x), True))
         cls = ' class="error"' if r["error"] else "" if row_valid(r) else ' class="invalid"'
         lines.append(f"<tr{cls}>" + "".join(cells) + "</tr>")
     lines.append("</table>")

@@ -12,35 +12,21 @@ figures are report.as_json's, so the page, the JSON and the text never disagree.
 from __future__ import annotations
 
 import base64
-import html
 import json
 from pathlib import Path
 from typing import Any
 
+from ..core.html_page import BASE_STYLE, cell, escaped
 from .figures import TITLES, figures, write_figures
 from .report import as_json, as_text
 
 #: the report folder's files besides the figures (figures.figure_path names those)
 TEXT_NAME, JSON_NAME, PAGE_NAME = "identification.txt", "identification.json", "identification.html"
 
-_STYLE = """
-body { font-family: sans-serif; margin: 1.5em; color: #222; }
-table { border-collapse: collapse; margin: 0.5em 0 1.5em; font-size: 0.85em; }
-th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; }
-th { background: #eee; } td.text { text-align: left; }
+_STYLE = BASE_STYLE + """
 tr.held td { background: #f2f2f2; color: #666; font-style: italic; }
 tr.unused td { background: #fff8e0; color: #666; }
-img { max-width: 100%; display: block; margin: 0.5em 0 1.5em; }
-pre { background: #f6f6f6; padding: 0.5em; white-space: pre-wrap; }
 """
-
-
-def _e(v: Any) -> str:
-    return html.escape("" if v is None else str(v))
-
-
-def _td(v: Any, text: bool = False) -> str:
-    return f'<td class="text">{_e(v)}</td>' if text else f"<td>{_e(v)}</td>"
 
 
 def _num(x: float | None) -> str:
@@ -49,7 +35,7 @@ def _num(x: float | None) -> str:
 
 def _table(head: list[str], rows: list[tuple[str, list[str]]]) -> str:
     """A table of already-escaped cells; each row with its class ('' for none)."""
-    lines = ["<table><tr>" + "".join(f"<th>{_e(h)}</th>" for h in head) + "</tr>"]
+    lines = ["<table><tr>" + "".join(f"<th>{escaped(h)}</th>" for h in head) + "</tr>"]
     for cls, cells in rows:
         attribute = f' class="{cls}"' if cls else ""
         lines.append(f"<tr{attribute}>" + "".join(cells) + "</tr>")
@@ -63,9 +49,9 @@ def _parameter_table(parameters: list[dict[str, Any]]) -> str:
     for p in parameters:
         ci = (f"[{_num(p['ci95'][0])}, {_num(p['ci95'][1])}]" if p["ci95"] is not None else "")
         change = f"{p['change_pct']:+.2f} %" if p["change_pct"] is not None else ""
-        cells = [_td(p["name"], True), _td(p["units"], True), _td(_num(p["base"])),
-                 _td(_num(p["value"])), _td(change), _td(ci), _td(p["status"], True),
-                 _td(p["reason"], True), _td(", ".join(p["sources"]), True)]
+        cells = [cell(p["name"], True), cell(p["units"], True), cell(_num(p["base"])),
+                 cell(_num(p["value"])), cell(change), cell(ci), cell(p["status"], True),
+                 cell(p["reason"], True), cell(", ".join(p["sources"]), True)]
         rows.append(("held" if str(p["status"]).startswith("held") else "", cells))
     return _table(["parameter", "units", "base", "identified", "change", "95 % interval",
                    "status", "reason", "sources"], rows)
@@ -80,16 +66,16 @@ def _logs_table(logs: list[dict[str, Any]]) -> str:
         excited = "friction (position profile)" if friction else u["input"]
         current = f"{u['current_rms_a']:.3g}" if u["input"] and not friction else ""
         rows.append(("" if u["used"] else "unused",
-                     [_td(Path(u["path"]).name, True),
-                      _td("used" if u["used"] else "not used", True), _td(excited, True),
-                      _td(current), _td(u["note"], True)]))
+                     [cell(Path(u["path"]).name, True),
+                      cell("used" if u["used"] else "not used", True), cell(excited, True),
+                      cell(current), cell(u["note"], True)]))
     return _table(["log", "", "excited", "current (A RMS)", "note"], rows)
 
 
 def _fit_table(figures_json: dict[str, Any]) -> str:
     mag, phase = figures_json["rms_magnitude_db"], figures_json["rms_phase_deg"]
-    rows = [("", [_td(f"{which} model", True), _td(f"{mag[which]:.3f}"),
-                  _td(f"{phase[which]:.2f}")]) for which in ("base", "identified")]
+    rows = [("", [cell(f"{which} model", True), cell(f"{mag[which]:.3f}"),
+                  cell(f"{phase[which]:.2f}")]) for which in ("base", "identified")]
     return _table(["model vs measured", "RMS magnitude (dB)", "RMS phase (deg)"], rows)
 
 
@@ -98,8 +84,8 @@ def _figure_sections(pngs: dict[str, bytes]) -> list[str]:
     for name, png in pngs.items():
         title = TITLES.get(name, name)
         data = base64.b64encode(png).decode("ascii")
-        out.append(f"<h3>{_e(title)}</h3>"
-                   f'<img alt="{_e(title)}" src="data:image/png;base64,{data}">')
+        out.append(f"<h3>{escaped(title)}</h3>"
+                   f'<img alt="{escaped(title)}" src="data:image/png;base64,{data}">')
     return out
 
 
@@ -108,11 +94,11 @@ def _header(doc: dict[str, Any]) -> list[str]:
     used = sum(1 for u in doc["logs"] if u["used"])
     lo, hi = doc["band_hz"]
     return ["<!DOCTYPE html>", '<html lang="en"><head><meta charset="utf-8">',
-            f"<title>identification of {_e(base.name)}</title>",
+            f"<title>identification of {escaped(base.name)}</title>",
             f"<style>{_STYLE}</style></head><body>",
-            f"<h1>Identification from {_e(base.name)}</h1>",
-            f"<p>base file {_e(base)}<br>"
-            f"written: {_e(doc['written'] or 'no testbed file written')}<br>"
+            f"<h1>Identification from {escaped(base.name)}</h1>",
+            f"<p>base file {escaped(base)}<br>"
+            f"written: {escaped(doc['written'] or 'no testbed file written')}<br>"
             f"{used} of {len(doc['logs'])} log(s) used; {doc['bins_used']} bins with coherence "
             f"&ge; {doc['min_coherence']:g} in {lo:g}-{hi:g} Hz</p>"]
 
@@ -130,12 +116,12 @@ def html_page(result: Any, written_to: str = "", pngs: dict[str, bytes] | None =
             f"{doc['reduced_chi_square']:.3g} (1: the model explains the data as well as "
             f"their noise allows)</p>"]
     if doc["notes"]:
-        out.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_e(n)}</li>" for n in doc["notes"])
+        out.append("<h2>Notes</h2><ul>" + "".join(f"<li>{escaped(n)}</li>" for n in doc["notes"])
                    + "</ul>")
     if pngs:
         out.append("<h2>Figures</h2>")
         out += _figure_sections(pngs)
-    out += ["<h2>Report</h2>", f"<pre>{_e(as_text(result, written_to))}</pre>", "</body></html>"]
+    out += ["<h2>Report</h2>", f"<pre>{escaped(as_text(result, written_to))}</pre>", "</body></html>"]
     return "\n".join(out) + "\n"
 
 
