@@ -6,7 +6,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from .pipeline import Identification
+from .pipeline import Identification, LogUse
 
 
 def _value(x: float) -> str:
@@ -35,16 +35,20 @@ def as_json(result: Identification, written_to: str = "") -> dict[str, Any]:
         "notes": list(result.notes)}
 
 
+def log_line(u: LogUse) -> str:
+    """What one log was used for, in a line (the text report and the window's notes)."""
+    what = ("friction: a position profile" if u.purpose == "friction"
+            else f"{u.input_channel}, {u.current_rms_a:.3g} A RMS" if u.input_channel else "")
+    return (f"{'used' if u.used else 'not used'}: {u.path.name}" + (f" ({what})" if what else "")
+            + (f" - {u.note}" if u.note else ""))
+
+
 def as_text(result: Identification, written_to: str = "") -> str:
     fit = result.fit
     lines = [f"identified from {sum(u.used for u in result.logs)} of {len(result.logs)} log(s), "
              f"base {result.base.path.name}; {fit.bins_used} bins with coherence >= "
              f"{fit.min_coherence:g} in {fit.band_hz[0]:g}-{fit.band_hz[1]:g} Hz"]
-    for u in result.logs:
-        lines.append(f"  {'used' if u.used else 'not used'}: {u.path.name}"
-                     + (" (friction: a position profile)" if u.purpose == "friction" else
-                        f" ({u.input_channel}, {u.current_rms_a:.3g} A RMS)" if u.input_channel else "")
-                     + (f" - {u.note}" if u.note else ""))
+    lines += [f"  {log_line(u)}" for u in result.logs]
     lines.append(f"{'parameter':32s} {'base':>11s} {'identified':>11s} {'change':>8s}  "
                  f"95 % interval")
     for p in result.provenance:

@@ -26,6 +26,7 @@ from PySide6.QtGui import QColor, QFont
 from PySide6.QtWidgets import (QComboBox, QHBoxLayout, QLabel, QPlainTextEdit, QPushButton,
                                QSplitter, QVBoxLayout, QWidget)
 
+from ...identification.report import log_line
 from ...identification.testbed_file import write_identified
 from .jobs import IdentifyResult
 # the FRF tab's phase drawing, shared in the package (its tests know it by this name)
@@ -56,12 +57,7 @@ def summary_line(result: IdentifyResult) -> str:
 
 def notes_text(result: IdentifyResult) -> str:
     """What each log served for, then the identification's notes."""
-    lines = []
-    for u in result.identification.logs:
-        what = ("friction: a position profile" if u.purpose == "friction"
-                else f"{u.input_channel}, {u.current_rms_a:.3g} A RMS" if u.input_channel else "")
-        lines.append(f"{'used' if u.used else 'not used'}: {u.path.name}"
-                     + (f" ({what})" if what else "") + (f" - {u.note}" if u.note else ""))
+    lines = [log_line(u) for u in result.identification.logs]
     lines += [f"note: {n}" for n in result.identification.notes]
     return "\n".join(lines)
 
