@@ -163,12 +163,16 @@ def _short(key: str, v) -> str:
 class _Progress:
     """One line per step on a log, a live bar on a terminal."""
 
-    def __init__(self, total: int):
+    def __init__(self, total: int, interrupted=None):
         self.total = total
         self.tty = sys.stdout.isatty()
         self._last = None
+        #: a Ctrl-C noted but not surfaced stops the campaign here (core.stop_request)
+        self.interrupted = interrupted
 
     def __call__(self, step, fraction: float) -> None:
+        if self.interrupted is not None and self.interrupted.is_set():
+            raise KeyboardInterrupt
         head = f"[{step.index + 1}/{self.total}] {step.label()}"
         if self.tty:
             bar = "#" * int(20 * fraction)
@@ -199,6 +203,7 @@ def _cmd_run(args) -> int:
     from ..campaign import CampaignReport, CampaignRunner, load_campaign
     from ..campaign.run_setup import resolve_setup
     from ..core.dictionary import load_dictionary
+    from ..core.stop_request import InterruptMemory
     from ..station.options import ConsolePublishing, FastSimOptions
     from ..station.station import Station as Testbed
 
@@ -236,11 +241,13 @@ def _cmd_run(args) -> int:
         fast = FastSimOptions(where=setup["fast_sim"]) if setup["fast"] else False
         publishing = (ConsolePublishing(args.publish, curve_keys=args.curve_keys)
                       if args.publish else None)
-        with Testbed(setup["device"], testbed=c.testbed, fast=fast, generator=generator,
-                     log_folder=folder, seed=setup["seed"], take_over=args.take_over, operator=operator,
-                     publishing=publishing, echo=lambda text: print(f"    {text}", flush=True)) as tb:
+        with InterruptMemory() as ctrl_c, \
+                Testbed(setup["device"], testbed=c.testbed, fast=fast, generator=generator,
+                        log_folder=folder, seed=setup["seed"], take_over=args.take_over,
+                        operator=operator, publishing=publishing,
+                        echo=lambda text: print(f"    {text}", flush=True)) as tb:
             runner = CampaignRunner(c, tb, max_step_seconds=args.max_step_seconds,
-                                    progress=_Progress(len(c.steps)))
+                                    progress=_Progress(len(c.steps), ctrl_c.requested))
             report = runner.run(resume)
     except KeyboardInterrupt:
         # outside a step (connecting, closing): the Testbed's exit has made the rig safe
