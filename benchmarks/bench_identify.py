@@ -257,12 +257,11 @@ def format_rows(rows: list[dict]) -> str:
 # ---------------------------------------------------------------------- the runs
 def cpu_model() -> str:
     try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return "CPU model unknown"
+        lines = Path("/proc/cpuinfo").read_text().splitlines()
+    except OSError:                     # not Linux: the model is only a label in the output
+        lines = []
+    models = [line.split(":", 1)[1].strip() for line in lines if line.startswith("model name")]
+    return models[0] if models else "CPU model unknown"
 
 
 def device_seconds(report_path: Path) -> float:

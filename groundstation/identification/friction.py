@@ -144,13 +144,13 @@ def friction_params(tb: Testbed, *, coulomb: float | None = None, sigma: float |
 
 def _scan(path: Path, plant: Testbed, notes: list[str]):
     """(the log's settled constant-velocity passes or None, its loop or None)."""
-    sweep = loop = None
+    loop = None
     try:
         sweep = friction_velocity_from_log(path, drive_channel="current_coarse", testbed=plant)
-        if not any(s.settled for s in sweep.result.segments):
-            sweep = None
-    except LogIdentificationError:
-        pass                                  # no constant-velocity pass: not a sweep log
+    except LogIdentificationError:            # no constant-velocity pass: not a sweep log
+        sweep = None
+    if sweep is not None and not any(s.settled for s in sweep.result.segments):
+        sweep = None                          # passes, but none settled: no running friction
     try:
         loop = hysteresis_from_log(path, testbed=plant)
     except LogIdentificationError as exc:

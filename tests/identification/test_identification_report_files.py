@@ -23,15 +23,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from groundstation import Testbed
 from groundstation.cli.main import main
+from identification_helpers import record_sysid_logs
 from groundstation.identification.figures import (friction_loops, hysteresis_figure,
                                                   png_bytes)
 from groundstation.identification.html import write_report
 from groundstation.identification.pipeline import identify
 
 ROOT = Path(__file__).resolve().parents[2]
-WAVEFORMS = ROOT / "profiles/waveforms"
 BASE = ROOT / "profiles/testbeds/relative_2dof.toml"
 RECORD_S = 4.0
 #: a log's name with the characters HTML gives a meaning to: shown, never interpreted
@@ -44,15 +43,7 @@ MIN_PNG_BYTES = 20_000
 @pytest.fixture(scope="module")
 def logs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("identify_report_logs")
-    recorded = []
-    for profile in ("sysid_coarse_noise_1A", "sysid_fine_noise_1A"):
-        with Testbed("sim", testbed=BASE, fast=True, generator=None, log_folder=folder / "logs",
-                     history=folder / "history") as tb:
-            tb.set_mode("OPEN_LOOP")
-            recorded.append(tb.start_recording(profile))
-            tb.dwell(0.2)
-            tb.play(WAVEFORMS / f"{profile}.toml", max_seconds=RECORD_S)
-            tb.stop_recording()
+    recorded = record_sysid_logs(BASE, folder, RECORD_S)
     awkward = folder / AWKWARD_NAME
     shutil.copyfile(recorded[1], awkward)
     return [Path(recorded[0]), awkward]

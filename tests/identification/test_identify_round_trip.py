@@ -24,6 +24,7 @@ import pytest
 
 from groundstation import Testbed
 from groundstation.cli.main import main
+from identification_helpers import record_sysid_logs
 from groundstation.plant.slope_table import load_slope_table
 from groundstation.plant.testbed import load_testbed
 from groundstation.profiles.profile import profile_from_dict
@@ -80,15 +81,7 @@ def rig(request, tmp_path_factory):
     folder = tmp_path_factory.mktemp(f"identify_{request.param}")
     base = ROOT / "profiles/testbeds" / base_name
     hidden = hidden_file(base, factors, folder)
-    logs = []
-    for profile in ("sysid_coarse_noise_1A", "sysid_fine_noise_1A"):
-        with Testbed("sim", testbed=hidden, fast=True, generator=None, log_folder=folder / "logs",
-                     history=folder / "history") as tb:
-            tb.set_mode("OPEN_LOOP")
-            logs.append(tb.start_recording(profile))
-            tb.dwell(0.2)
-            tb.play(WAVEFORMS / f"{profile}.toml", max_seconds=RECORD_S)
-            tb.stop_recording()
+    logs = record_sysid_logs(hidden, folder, RECORD_S)
     if request.param == "relative":
         logs += friction_logs(hidden, folder)
     return {"base": base, "hidden": load_testbed(hidden), "factors": factors, "logs": logs,
