@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: run test test-stressed bench setup clean
+.PHONY: run test test-stressed bench setup clean firmware
 
 setup: $(STAMP)
 
@@ -19,8 +19,21 @@ $(STAMP): pyproject.toml tools/system-deps.sh
 run: $(STAMP)
 	$(VENV)/bin/groundstation run
 
-test: $(STAMP)
+test: $(STAMP) firmware
 	QT_QPA_PLATFORM=offscreen $(PY) -m pytest -q
+
+# the C reference device (firmware/reference_device/README.md): C99 on the exported kit
+FW_DIR := firmware/reference_device
+FW_BIN := $(FW_DIR)/build/hfb_reference_device
+FW_SRC := $(wildcard $(FW_DIR)/src/*.c) $(FW_DIR)/kit/hfb_protocol.c
+FW_HDR := $(wildcard $(FW_DIR)/src/*.h) $(FW_DIR)/kit/hfb_protocol.h
+FW_CFLAGS := -std=c99 -Wall -Wextra -Werror -O2
+
+firmware: $(FW_BIN)
+
+$(FW_BIN): $(FW_SRC) $(FW_HDR)
+	mkdir -p $(FW_DIR)/build
+	gcc $(FW_CFLAGS) -I$(FW_DIR)/kit -o $@ $(FW_SRC) -lm
 
 # the suite three times in a row beside a CPU-burning load (docs/testing.md)
 test-stressed: $(STAMP)
