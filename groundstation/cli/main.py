@@ -30,6 +30,7 @@ import time
 
 from ..core.contracts import DeviceLink
 from . import analysis as cli_analysis
+from . import conformance as cli_conformance
 from . import campaign as cli_campaign
 from . import fg as cli_fg
 from . import identify as cli_identify
@@ -106,7 +107,7 @@ def _cmd_sim(args) -> int:
     dev = SimulatedDevice(load_dictionary(args.protocol_dir), host=args.host,
                           tcp_port=args.tcp_port, pacing=args.pacing, seed=args.seed,
                           frames_per_datagram=args.frames_per_datagram, testbed=testbed,
-                          speed=args.speed)
+                          speed=args.speed, deviations=_deviations(args))
     dev.start()
     fg = None
     if args.fg_port is not None:          # the base-stage function generator (SCPI on TCP)
@@ -144,6 +145,12 @@ def _cmd_sim(args) -> int:
             fg.stop()
         dev.stop()
     return 0
+
+
+def _deviations(args):
+    from ..sim.deviations import Deviations
+
+    return Deviations(args.deviate or ())
 
 
 def _cmd_monitor(args) -> int:
@@ -253,6 +260,16 @@ def _add_console_options(s, *, watch: bool = True, publish: bool = True) -> None
 
 
 
+def _add_deviate_option(s) -> None:
+    """`sim --deviate NAME`: test only (sim/deviations.py); the names are repeated here so
+    that parsing the command line imports nothing."""
+    s.add_argument("--deviate", action="append", default=None, metavar="NAME",
+                   choices=["crc-range", "retry-twice", "watchdog-x2", "commit-no-crc",
+                            "profile-late", "foreign-host"],
+                   help="test only: break one rule of the SPEC on purpose, to show that "
+                        "`groundstation conformance` catches it")
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="groundstation",
                                 description="Ground station for hybrid-flexure-bearing testbeds")
@@ -290,6 +307,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--pty", action="store_true",
                    help="also serve a serial link on a pseudo-terminal (prints its name)")
     s.add_argument("--announce", action="store_true", help=argparse.SUPPRESS)
+    _add_deviate_option(s)
     s.set_defaults(func=_cmd_sim)
 
     for name, helptext in (("monitor", "connect to a device and print live link statistics"),
@@ -326,12 +344,9 @@ def build_parser() -> argparse.ArgumentParser:
     k.add_argument("folder")
     k.add_argument("--name", default="viewer", help="the viewer's key pair (default viewer)")
     s.set_defaults(func=_cmd_fanout)
-    cli_params.add_parsers(sub)
-    cli_profile.add_parsers(sub)
-    cli_campaign.add_parsers(sub)
-    cli_fg.add_parsers(sub)
-    cli_analysis.add_parsers(sub)
-    cli_identify.add_parsers(sub)
+    for module in (cli_params, cli_profile, cli_campaign, cli_fg, cli_analysis, cli_identify,
+                   cli_conformance):
+        module.add_parsers(sub)
     return p
 
 

@@ -24,6 +24,7 @@ from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import LinkLostError, PortInUseError
 from ..link.transports import StreamTransport, TcpStream, listening_socket
 from . import core
+from .deviations import Deviations
 from .firmware import REJECTED, Firmware
 from ..plant.testbed import Testbed
 
@@ -114,7 +115,8 @@ class SimulatedDevice:
     def __init__(self, dictionary: Dictionary | None = None, *, host: str = "127.0.0.1",
                  tcp_port: int = 0, pacing: str = "realtime", seed: int = 0,
                  frames_per_datagram: int = 1, firmware: Firmware | None = None,
-                 testbed: Testbed | None = None, speed: float = 1.0):
+                 testbed: Testbed | None = None, speed: float = 1.0,
+                 deviations: Deviations | None = None):
         if pacing not in (SimPacing.REALTIME, SimPacing.FAST, SimPacing.MANUAL):
             raise ValueError(f"pacing must be realtime, fast or manual, not {pacing!r}")
         if not speed > 0 or speed == float("inf"):
@@ -122,6 +124,9 @@ class SimulatedDevice:
         self.dictionary = dictionary or load_dictionary()
         self.codec = FrameCodec(self.dictionary)
         self.firmware = firmware or Firmware(self.dictionary, seed=seed, testbed=testbed)
+        if deviations:                  # test only: a device that breaks the SPEC on purpose
+            self.firmware.deviations = deviations
+            self.firmware.fw[core.FW_WD_TICKS] *= deviations.watchdog_factor
         #: control periods per HOUSEKEEPING frame (the dictionary's rates)
         self.housekeeping_divider = housekeeping_divider(self.dictionary)
         self.host = host
@@ -348,6 +353,7 @@ class SimulatedDevice:
         target = self._telemetry_target()
         if target is None or not frames:
             return
+        frames = self.firmware.deviations.outgoing(frames)
         if target[0] == "stream":
             target[1].send(b"".join(frames))
             return

@@ -25,6 +25,7 @@ from ..params import table as ptable
 from . import core
 from . import friction as fr
 from .engine import Engine
+from .deviations import NONE as NO_DEVIATIONS
 from ..plant.testbed import Testbed, load_testbed
 
 log = logging.getLogger(__name__)
@@ -51,6 +52,9 @@ class _Staging:
 
 class Firmware:
     """Device-side state machine of the testbed controller."""
+
+    #: deliberate SPEC deviations for the conformance suite's tests (sim/deviations.py)
+    deviations = NO_DEVIATIONS
 
     def __init__(self, dictionary: Dictionary, *, seed: int = 0, description: str = "",
                  testbed: Testbed | None = None):
@@ -150,7 +154,7 @@ class Firmware:
                        peer: Any = None) -> list[Stage]:
         """Check and execute one COMMAND; returns the RESPONSE stages to send."""
         key = (sequence, opcode)
-        if key in self._done:                 # a retry: answer again, never execute twice
+        if key in self._done and not self.deviations.replays_execute:   # a retry: answer again, never execute twice
             return self._done[key]
         try:
             stages = self._execute(sequence, token, opcode, args, peer)
@@ -211,7 +215,8 @@ class Firmware:
     def _cmd_connect(self, v, peer):
         if v["protocol_major"] != self.d.version_major or v["dictionary_hash"] != self.d.hash:
             return [Stage(REJECTED, self._reason("DICTIONARY_MISMATCH"), self._connect_reply(0))]
-        if self.session_token is not None and not v["take_over"] and peer != self.session_peer:
+        if self.session_token is not None and not v["take_over"] and peer != self.session_peer \
+                and not self.deviations.connect_ignores_owner:
             return self._reject("SESSION_BUSY")
         if self.session_token is not None:
             self._emit("WARNING", "SESSION_TAKEN_OVER",
@@ -343,7 +348,7 @@ class Firmware:
         if self.armed:
             return self._reject("INVALID_STATE")
         blob = bytes(st.buffer)
-        if zlib.crc32(blob) != v["table_crc"]:
+        if zlib.crc32(blob) != v["table_crc"] and self.deviations.commit_checks_crc:
             return [Stage(ACCEPTED), Stage(FAILED, self._reason("CRC_MISMATCH"))]
         values = ptable.unpack(self.d, blob)
         if ptable.problems(self.d, values):
@@ -351,6 +356,7 @@ class Firmware:
         # activation happens here, between two step() calls: a control-cycle boundary
         self.params, self.param_blob = values, blob
         self.engine.apply_parameters(values)
+        self.fw[core.FW_WD_TICKS] *= self.deviations.watchdog_factor
         self.fw[core.FW_COMP_ON] = float(values["friction_comp_enabled"])
         self.param_crc, self.param_version = zlib.crc32(blob), st.meta["version"]
         del self._staging["param"]
@@ -412,7 +418,7 @@ class Firmware:
         if self.mode not in allowed[self.profile["target"]]:
             return self._reject("INVALID_STATE")
         self.engine.load_profile(self.profile["samples"], self.profile["target"])
-        self.fw[core.FW_PROF_POS] = 0.0
+        self.fw[core.FW_PROF_POS] = self.deviations.profile_start_position
         self.fw[core.FW_PROF_ACTIVE] = 1.0
         self._emit("INFO", "PROFILE_STARTED", f"profile {self.profile['profile_id']} started")
         return self._ok()

@@ -24,7 +24,7 @@ FG_ANNOUNCE = "FG_LISTENING "       # the function generator's line (sim --fg-po
 class SimulatorProcess:
     def __init__(self, *, host: str = "127.0.0.1", tcp_port: int = 0, pacing: str = "realtime",
                  seed: int = 0, testbed: str | None = None, start_timeout: float = 60.0,
-                 speed: float = 1.0, fg_port: int | None = None):
+                 speed: float = 1.0, fg_port: int | None = None, deviations: tuple = ()):
         self.args = [sys.executable, "-m", "groundstation", "sim", "--host", host,
                      "--tcp-port", str(tcp_port), "--pacing", pacing, "--seed", str(seed),
                      "--announce"] + (["--testbed", str(testbed)] if testbed else [])
@@ -32,6 +32,8 @@ class SimulatorProcess:
             self.args += ["--speed", repr(float(speed))]
         if fg_port is not None:             # serve the function generator too (0: any port)
             self.args += ["--fg-port", str(fg_port)]
+        for name in deviations:             # test only: sim/deviations.py
+            self.args += ["--deviate", name]
         self.start_timeout = start_timeout
         self.seed = seed
         self.proc: subprocess.Popen | None = None

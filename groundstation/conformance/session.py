@@ -1,0 +1,113 @@
+"""§7 session and §8 dictionary hash: token, ownership, take-over, other hosts, ABORT."""
+
+from __future__ import annotations
+
+from .check import Check
+from .context import Context, Verdict
+
+
+def connect_reply(ctx: Context, v: Verdict) -> None:
+    """§7/§8: the CONNECT that opened this run's session, and a fresh CONNECT by the owner."""
+    h = ctx.host
+    ex = h.connect()             # the owner's own connection: never busy, a fresh session
+    v.note(f"sent CONNECT (hash 0x{ctx.d.hash:08X}, take_over 0) on the owner's connection")
+    v.note(f"got {ctx.outcome(ex)}")
+    if not v.expect(ctx.is_ok(ex), "§7: a CONNECT on the owner's own connection is never "
+                                   "busy: ACCEPTED then COMPLETED"):
+        return
+    r = h.reply(ex, "CONNECT")
+    v.expect(r["session_token"] != 0, f"§7: session_token non-zero (0x{r['session_token']:08X})")
+    v.expect(r["protocol_major"] == ctx.d.version_major and r["protocol_minor"] == ctx.d.version_minor,
+             f"§7: device protocol {r['protocol_major']}.{r['protocol_minor']}, ours "
+             f"{ctx.d.version_major}.{ctx.d.version_minor}")
+    v.expect(r["dictionary_hash"] == ctx.d.hash, f"§8: dictionary hash 0x{r['dictionary_hash']:08X}"
+             f", ours 0x{ctx.d.hash:08X}")
+    ex2 = h.connect()
+    r2 = h.reply(ex2, "CONNECT") if ctx.is_ok(ex2) else {"session_token": None}
+    v.expect(r2["session_token"] not in (None, 0, r["session_token"]),
+             "§7: each CONNECT gives a new token (two CONNECTs, two different tokens)")
+
+
+def dictionary_mismatch(ctx: Context, v: Verdict) -> None:
+    """§8/§7 step 1: a CONNECT with another hash is REJECTED DICTIONARY_MISMATCH, with the
+    device's identity in the data."""
+    other = ctx.other_host()
+    wrong = ctx.d.hash ^ 0xA5A5A5A5
+    ex = other.connect(dictionary_hash=wrong, telemetry_port=0)
+    v.note(f"sent CONNECT with dictionary_hash 0x{wrong:08X} from a second connection")
+    v.note(f"got {ctx.outcome(ex)}")
+    if not v.expect(ctx.refused(ex, 2, "DICTIONARY_MISMATCH"), "REJECTED DICTIONARY_MISMATCH (6)"):
+        return
+    r = other.reply(ex, "CONNECT")
+    v.expect(r["session_token"] == 0, f"data laid out as CONNECT's reply with session_token 0 "
+             f"(got {r['session_token']})")
+    v.expect(r["dictionary_hash"] == ctx.d.hash, f"data names the device's hash "
+             f"0x{r['dictionary_hash']:08X}")
+    info = other.exchange("GET_INFO", {}, token=0)
+    if v.expect(ctx.is_ok(info), f"§7: GET_INFO needs no session: {ctx.outcome(info)}"):
+        v.expect(other.reply(info, "GET_INFO")["dictionary_hash"] == ctx.d.hash,
+                 "§8: GET_INFO reports the same dictionary hash")
+
+
+def foreign_host_refused(ctx: Context, v: Verdict) -> None:
+    """§7 step 2: another host's CONNECT without take_over is SESSION_BUSY; the owner keeps
+    the session; a wrong token is NOT_SESSION_OWNER with the owner named."""
+    other = ctx.other_host()
+    ex = other.connect(telemetry_port=0)
+    v.note(f"sent CONNECT take_over 0 from a second TCP connection while this run owns the "
+           f"session; got {ctx.outcome(ex)}")
+    v.expect(ctx.refused(ex, 2, "SESSION_BUSY"), "§7: REJECTED SESSION_BUSY (5)")
+    mark = ctx.host.mark()
+    hb = other.exchange("HEARTBEAT", {}, token=ctx.host.token ^ 0x5A5A5A5A)
+    v.note(f"sent HEARTBEAT with a wrong token from the second connection; got {ctx.outcome(hb)}")
+    if v.expect(ctx.refused(hb, 2, "NOT_SESSION_OWNER"), "§7: REJECTED NOT_SESSION_OWNER (4)"):
+        text = hb.final.data.decode("utf-8", "replace")
+        v.expect(text.startswith("owner ") and " since tick " in text,
+                 f"§7: data names the owner: {text!r}")
+    v.expect(ctx.wait_event(mark, "COMMAND_REJECTED") is not None,
+             "§6.3: the owner receives EVENT COMMAND_REJECTED")
+    mine = ctx.host.exchange("HEARTBEAT", {})
+    v.expect(ctx.is_ok(mine), f"§7: the owner's token still works: HEARTBEAT {ctx.outcome(mine)}")
+
+
+def take_over(ctx: Context, v: Verdict) -> None:
+    """§7 step 3: take_over = 1 opens a new session, the old token dies, the device goes
+    to the safe state and says SESSION_TAKEN_OVER to the new owner."""
+    other = ctx.other_host()
+    old = ctx.host.token
+    ex = other.connect(take_over=True, telemetry_port=0)
+    v.note(f"sent CONNECT take_over 1 from a second connection; got {ctx.outcome(ex)}")
+    if not v.expect(ctx.is_ok(ex), "§7: ACCEPTED then COMPLETED"):
+        return
+    v.expect(other.token not in (0, old), "§7: a new, non-zero token")
+    ev = other.wait_frame(lambda f: f.packet_id == ctx.ids["EVENT"]
+                          and int.from_bytes(f.payload[1:3], "big")
+                          == ctx.d.event_codes["SESSION_TAKEN_OVER"], 0, 2.0)
+    v.expect(ev is not None, "§7: EVENT SESSION_TAKEN_OVER reaches the new owner")
+    hb = ctx.host.exchange("HEARTBEAT", {}, token=old)
+    v.note(f"old owner's HEARTBEAT with its old token: {ctx.outcome(hb)}")
+    v.expect(ctx.refused(hb, 2, "NOT_SESSION_OWNER"), "§7: the old token is refused "
+             "(NOT_SESSION_OWNER)")
+    back = ctx.host.connect(take_over=True)
+    v.expect(ctx.is_ok(back), f"taking the session back: CONNECT take_over 1 {ctx.outcome(back)}")
+
+
+def abort_always(ctx: Context, v: Verdict) -> None:
+    """§7/§9.2: ABORT is accepted from anyone, always, and does not end the session."""
+    other = ctx.other_host()
+    for token in (0, 0xDEADBEEF):
+        ex = other.exchange("ABORT", {}, token=token)
+        v.note(f"sent ABORT with token 0x{token:08X} from a host without the session; "
+               f"got {ctx.outcome(ex)}")
+        v.expect(ctx.is_ok(ex), "ACCEPTED then COMPLETED")
+    mine = ctx.host.exchange("HEARTBEAT", {})
+    v.expect(ctx.is_ok(mine), f"the session survives ABORT: owner's HEARTBEAT {ctx.outcome(mine)}")
+
+
+CHECKS = [
+    Check("§7", "CONNECT reply and fresh session on the owner's connection", connect_reply),
+    Check("§8", "dictionary hash mismatch refused at CONNECT", dictionary_mismatch),
+    Check("§7", "foreign host refused, token and ownership", foreign_host_refused),
+    Check("§7", "take-over", take_over),
+    Check("§7", "ABORT always accepted", abort_always),
+]
