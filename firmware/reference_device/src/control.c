@@ -1,10 +1,7 @@
 /*
  * control.c - one control period (SPEC 10.1, in its order), the watchdog (SPEC 9.1),
  * faults (SPEC 9.2), and the arm/disarm/mode transitions (SPEC 10).
- *
- * The friction compensator of SPEC 10.1 step 5 is NOT implemented in this reference:
- * T_fc is always 0 (HIGH_RATE friction_comp_torque reads 0; status.friction_comp_on is
- * still kept as SPEC 10 says).  See README.md.
+ * The friction compensator itself (step 5) is friction.c.
  */
 #include <math.h>
 #include <stdio.h>
@@ -109,7 +106,7 @@ void control_period(void)
 {
     period_record_t r;
     sensors_t s;
-    double u1 = 0.0, u2 = 0.0;
+    double u1 = 0.0, u2 = 0.0, t_fc;
     uint32_t limit_ticks;
     double timeout = (double)dev.p.watchdog_timeout;
 
@@ -142,7 +139,11 @@ void control_period(void)
     /* 4. profile */
     profile_step();
 
-    /* 5. friction compensator: not implemented here, T_fc = 0 (see the file comment) */
+    /* 5. friction compensator, every period, armed or not; its input is the outer
+          axis's increment (0 in the first period after boot) */
+    t_fc = friction_step(dev.have_last_phi1 ? s.phi1 - dev.last_phi1 : 0.0);
+    dev.last_phi1 = s.phi1;
+    dev.have_last_phi1 = 1;
 
     /* 6. control law, only while armed */
     if (dev.armed) {
@@ -166,7 +167,9 @@ void control_period(void)
             v = cascade_run(&dev.cascade[base + 0], e, n0);
             u1 = cascade_run(&dev.cascade[base + 1], v, n1);
             u2 = cascade_run(&dev.cascade[base + 2], v, n2);
-            /* (friction compensation would add T_fc to u1 here while it is on) */
+            if (dev.friction_comp_on) {
+                u1 += t_fc;                       /* feedback modes only, never OPEN_LOOP */
+            }
 
             /* 7. saturation and conditional integration */
             l1 = fmin((double)dev.p.saturation_coarse, PEAK_TORQUE_COARSE);
@@ -212,7 +215,7 @@ void control_period(void)
     r.autocollimator = s.autocollimator;
     r.u1 = u1;
     r.u2 = u2;
-    r.t_fc = 0.0;
+    r.t_fc = (dev.armed && dev.friction_comp_on) ? t_fc : 0.0;
     r.current_coarse = u1 / TORQUE_CONSTANT_COARSE;
     r.current_fine = u2 / TORQUE_CONSTANT_FINE;
     plant_electrics(r.current_coarse, r.current_fine, &r.voltage_coarse, &r.voltage_fine);

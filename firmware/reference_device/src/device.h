@@ -108,6 +108,8 @@ typedef struct {
     int friction_comp_on;
     double reference, rate_reference, current_cmd_coarse, current_cmd_fine;
     double los_estimate;
+    double last_phi1;             /* the friction compensator's input is its increment */
+    int have_last_phi1;
     cascade_t cascade[6];         /* relative c0 c1 c2, inertial c0 c1 c2 */
 
     /* parameter table (SPEC 11.1) */
@@ -190,6 +192,10 @@ int profile_target_plays_in_mode(uint8_t target, uint8_t mode);
 void profile_start(void);
 void profile_stop(int send_event);
 void profile_step(void);                    /* once per period, SPEC 10.1 step 4 */
+
+/* friction.c: the friction compensator (SPEC 10.1 step 5) */
+void friction_reset(void);
+double friction_step(double dphi);
 
 /* plant.c: the stand-in plant */
 typedef struct {

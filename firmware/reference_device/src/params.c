@@ -209,8 +209,8 @@ void params_activate(const uint8_t *t, uint16_t version)
     }
     /* the table sets the run-time switch (FRICTION_COMP changes it afterwards) */
     dev.friction_comp_on = dev.p.friction_comp_enabled;
-    /* the LOS estimate keeps its value: nothing to do; the friction compensator would
-       restart here */
+    /* the LOS estimate keeps its value; the friction compensator restarts */
+    friction_reset();
 }
 
 void params_boot(void)
