@@ -115,9 +115,11 @@ def housekeeping_contents(ctx: Context, v: Verdict) -> None:
         fw = ctx.host.reply(info, "GET_INFO")["firmware_version"]
         v.expect(hk["firmware_version"] == fw, f"firmware_version {hk['firmware_version']:#x} "
                  f"= GET_INFO's {fw:#x}")
-    if ctx.found_table is not None:
-        v.expect(hk["param_table_crc"] == zlib.crc32(ctx.found_table),
-                 f"param_table_crc 0x{hk['param_table_crc']:08X} = CRC of the table read back")
+    active = ctx.read_table()
+    hk = ctx.housekeeping_after(ctx.latest_tick()) or hk
+    v.expect(hk["param_table_crc"] == zlib.crc32(active),
+             f"param_table_crc 0x{hk['param_table_crc']:08X} = CRC of the table read back "
+             f"0x{zlib.crc32(active):08X}")
     v.expect(hk["watchdog"] == ctx.hk.item_by_name["watchdog"].states["OK"] or
              hk["watchdog"] == ctx.hk.item_by_name["watchdog"].states["EXPIRED"],
              f"watchdog {hk['watchdog']} with a session open (OK or EXPIRED)")

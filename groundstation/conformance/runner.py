@@ -27,11 +27,25 @@ class CannotRun(GroundStationError):
     """The suite cannot start against this device (exit status 2)."""
 
 
+class Unframed(Exception):
+    """CONNECT got no answer we could accept, but bytes came back that fail §2/§4: that
+    is a finding about the device (a FAIL), not a device we cannot reach."""
+
+    def __init__(self, result: Result):
+        super().__init__(result.name)
+        self.result = result
+
+
 def open_session(d: Dictionary, address: DeviceAddress) -> Host:
     host = Host(d, address)
     ex = host.connect()
     if ex.final is None:
         host.close()
+        if host.report.faults:
+            lines = [f"sent CONNECT; no RESPONSE frame passed the §2/§4 checks"]
+            lines += [f"FAIL {kind.replace('_', ' ')}: {getattr(host.report, kind)} - e.g. {text}"
+                      for kind, text in host.report.examples.items()]
+            raise Unframed(Result("§2.1", "CRC of every packet", FAIL, lines))
         raise CannotRun(f"{address}: no answer to CONNECT ({host.lost or 'nothing came back'})")
     if ex.final.stage != 3:
         errors = {v: k for k, v in d.error_codes.items()}
@@ -45,7 +59,11 @@ def open_session(d: Dictionary, address: DeviceAddress) -> Host:
 
 def run_checks(d: Dictionary, address: DeviceAddress, *, only: list[str], allow_motion: bool,
                say: Callable[[str], None], on_result: Callable[[Result], None]) -> list[Result]:
-    host = open_session(d, address)
+    try:
+        host = open_session(d, address)
+    except Unframed as bad:
+        on_result(bad.result)
+        return [bad.result]
     ctx = Context(d, address, allow_motion=allow_motion, host=host)
     results: list[Result] = []
     try:

@@ -25,7 +25,9 @@ def heartbeat_age(ctx: Context, v: Verdict) -> None:
 
 
 def _timeout_s(ctx: Context) -> float:
-    return float(ptable.unpack(ctx.d, ctx.found_table)["watchdog_timeout"])
+    """The active table's watchdog_timeout, read back now (not the one found at the
+    start: a device that activated a table it should have refused runs on that one)."""
+    return float(ptable.unpack(ctx.d, ctx.read_table())["watchdog_timeout"])
 
 
 def silent_host_disarms(ctx: Context, v: Verdict) -> None:
@@ -34,6 +36,7 @@ def silent_host_disarms(ctx: Context, v: Verdict) -> None:
     ctx.require_motion()
     h = ctx.host
     ctx.make_safe()
+    timeout = _timeout_s(ctx)        # read before ARM: every command resets the watchdog
     modes = ctx.d.command("SET_MODE").args[0].states
     m = h.exchange("SET_MODE", {"mode": modes["RELATIVE"]})
     v.note(f"SET_MODE RELATIVE: {ctx.outcome(m)} (a closed loop holding where it is)")
@@ -45,7 +48,6 @@ def silent_host_disarms(ctx: Context, v: Verdict) -> None:
         if not v.expect(ctx.is_ok(arm), "ARM accepted and completed"):
             return
         reset = arm.stages[0].tick       # ARM passes checks 1-4: it resets the watchdog
-        timeout = _timeout_s(ctx)
         expected = reset + math.floor(timeout * ctx.rate) + 1
         trip = ctx.high_rate_after(mark, lambda f: not f["armed"] and f["tick"] > reset,
                                    timeout=4 * timeout + 5.0)
