@@ -83,15 +83,35 @@ def test_connect_and_stream_without_errors_or_gaps(dictionary, suffix):
     assert hk["telemetry_overruns"] == 0
 
 
-def test_a_silent_host_trips_the_watchdog_in_the_documented_period(dictionary):
+def upload_table(client, dictionary, **changes) -> None:
+    """PARAM_BEGIN/WRITE/COMMIT of the default table with `changes`, packed by the
+    ground station's own packer (groundstation.params.table)."""
+    from groundstation.params.table import default_values, pack
+    values = default_values(dictionary)
+    values.update(changes)
+    table = pack(dictionary, values)
+    client.command("PARAM_BEGIN", table_version=5, table_length=len(table))
+    for off in range(0, len(table), 1000):
+        client.command("PARAM_WRITE", offset=off, data=table[off:off + 1000])
+    client.command("PARAM_COMMIT", table_crc=zlib.crc32(table))
+
+
+# (watchdog_timeout, periods after the last reset in which it trips); None: the default 1.0
+@pytest.mark.parametrize("timeout_s,trips_after", [(None, 1201), (0.7, 840)])
+def test_a_silent_host_trips_the_watchdog_in_the_documented_period(dictionary, timeout_s,
+                                                                   trips_after):
     """SPEC §9.1: armed, no heartbeat: the first period with more than
-    watchdog_timeout x 1200 ticks since the last reset disarms, IDLE, fault WATCHDOG."""
+    watchdog_timeout x 1200 ticks since the last reset disarms, IDLE, fault WATCHDOG.
+    f32 0.7 s is 839.99998 ticks, so the 840th period is already beyond it."""
+    assert float(np.float32(0.7)) * 1200 < 840
     with running_reference_device() as address:
         client = open_client(dictionary, address, heartbeat=False)
         blocks = []
         client.subscribe(blocks.append)
         try:
             client.connect()
+            if timeout_s is not None:
+                upload_table(client, dictionary, watchdog_timeout=timeout_s)
             client.command("SET_MODE", mode="OPEN_LOOP")
             arm = client.command("ARM")
             arm_tick = [s.device_tick for s in arm.stages if s.stage == "COMPLETED"][0]
@@ -108,7 +128,7 @@ def test_a_silent_host_trips_the_watchdog_in_the_documented_period(dictionary):
     assert hk_fault == 1                               # WATCHDOG
     after = ticks > arm_tick
     first_off = ticks[after][~armed[after]][0]
-    assert first_off == arm_tick + 1201                # 1.0 s x 1200 ticks, then one more
+    assert first_off == arm_tick + trips_after
     assert mode[ticks == first_off][0] == 0            # IDLE in that very period
     assert 14 in events and 12 in events               # WATCHDOG_EXPIRED, DISARMED
 

@@ -107,7 +107,7 @@ void control_period(void)
     period_record_t r;
     sensors_t s;
     double u1 = 0.0, u2 = 0.0, t_fc;
-    uint32_t limit_ticks;
+    double limit_ticks;
     double timeout = (double)dev.p.watchdog_timeout;
 
     dev.tick++;
@@ -129,8 +129,10 @@ void control_period(void)
     if (dev.deviations & DEV_WATCHDOG_X2) {
         timeout *= 2.0;
     }
-    limit_ticks = (uint32_t)(timeout * (double)HFB_CONTROL_RATE_HZ + 0.5);
-    if (dev.armed && dev.token != 0u && dev.tick - dev.watchdog_reset_tick > limit_ticks) {
+    /* compared in double, not rounded to whole ticks: f32 0.7 s is 839.99998 ticks, so
+       the 840th period since the reset is already "more than" it */
+    limit_ticks = (double)HFB_CONTROL_RATE_HZ * timeout;
+    if (dev.armed && dev.token != 0u && (double)(uint32_t)(dev.tick - dev.watchdog_reset_tick) > limit_ticks) {
         dev.watchdog_state = HFB_PKT_HOUSEKEEPING_WATCHDOG_EXPIRED;
         trip(HFB_PKT_HOUSEKEEPING_FAULT_CODE_WATCHDOG, HFB_EVT_WATCHDOG_EXPIRED,
              HFB_PKT_EVENT_LEVEL_CRITICAL, "watchdog expired: no heartbeat from the session owner");
