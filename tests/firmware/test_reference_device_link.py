@@ -197,10 +197,10 @@ class RawHost:
         self.udp.close()
 
     def send(self, opcode: int, args: bytes = b"", *, seq: int | None = None,
-             token: int | None = None) -> int:
+             token: int | None = None, version: int = 1) -> int:
         seq = self.seq = self.seq + 1 if seq is None else seq
         payload = struct.pack(">IH", self.token if token is None else token, opcode) + args
-        body = struct.pack(">BBBBHII", 0xEB, 0x90, 1, 0x10, len(payload), seq, 0) + payload
+        body = struct.pack(">BBBBHII", 0xEB, 0x90, version, 0x10, len(payload), seq, 0) + payload
         self.sock.sendall(body + struct.pack("<I", zlib.crc32(body)))
         return seq
 
@@ -360,5 +360,25 @@ def test_parameter_commit_rules(dictionary):
             assert a.exchange(PARAM_COMMIT, struct.pack(">I", crc))[0][:2] == (REJECTED, 11)
             (stage, reason, data), = a.exchange(PARAM_READ, struct.pack(">IH", 0, 4))[1:]
             assert data[4:] == struct.pack(">f", 2.5)
+        finally:
+            a.close()
+
+
+def test_connect_of_another_major_version_is_answered_dictionary_mismatch(dictionary):
+    """SPEC §7: such a frame fails framing (a version error), yet a device should answer
+    a CONNECT in it with REJECTED DICTIONARY_MISMATCH, in a frame of its own version."""
+    with running_reference_device() as address:
+        a = RawHost(address)
+        try:
+            args = struct.pack(">BBIHB", 2, 0, 0x12345678, a.udp.getsockname()[1], 0)
+            a.sock.sendall(b"junk\xeb")                  # the device must find it anyway
+            seq = a.send(CONNECT, args, token=0, version=2)
+            _, cseq, op, stage, reason, data = a.response()
+            assert (cseq, op, stage, reason) == (seq, CONNECT, REJECTED, 6)
+            token, major, minor, dhash, _tick = struct.unpack(">IBBII", data)
+            assert (token, major, minor, dhash) == (0, 1, 0, dictionary.hash)
+            # other commands of another version get no answer; a good CONNECT still works
+            a.send(HEARTBEAT, token=0, version=2)
+            assert [s[:2] for s in a.connect(dictionary)] == [(ACCEPTED, 0), (COMPLETED, 0)]
         finally:
             a.close()

@@ -59,6 +59,8 @@ typedef struct {
     hfb_deframer_t rx;
     size_t out_len;               /* bytes waiting in out[] (send buffer) */
     uint8_t out[65536];
+    size_t probe_len;             /* bytes in probe[] (version_probe.c) */
+    uint8_t probe[2u * HFB_MAX_FRAME];
 } connection_t;
 
 /* ---- one remembered command with the RESPONSE payloads sent for it (SPEC 6.4) ------ */
@@ -160,6 +162,9 @@ typedef struct {
 void telemetry_high_rate(const period_record_t *r);
 void telemetry_housekeeping(void);
 void event_send(uint8_t level, uint16_t code, const char *text);
+
+/* version_probe.c: CONNECT in a frame of another major version (SPEC 7) */
+void version_probe_feed(int c, const uint8_t *data, size_t n);
 
 /* session.c (SPEC 7, 9.1) */
 void session_connect(int c, uint32_t sequence, uint16_t opcode, const uint8_t *args, size_t n);
