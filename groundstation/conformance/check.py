@@ -27,6 +27,6 @@ class Check:
             w = want if want.startswith("§") else "§" + want
             if self.section == w or self.section.startswith(w + "."):
                 return True
-            if want.lower() in self.title.lower():
+            if not want.lstrip("§").replace(".", "").isdigit() and want.lower() in self.title.lower():
                 return True
         return False

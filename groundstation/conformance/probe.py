@@ -232,8 +232,12 @@ class Host:
         mark = self.mark()
         self.send(raw)
         defaults = self.d.command_defaults
+        # four times the host's accept timeout per try: the suite judges answers, not
+        # speed, and a loaded machine may be slow to run a simulated device
         accept = float(defaults.get("accept_timeout_s", 0.25)) * 4
         retries = int(defaults.get("retries", 3)) if resend else 0
+        if not resend:                   # one frame only: give it all the retries' time
+            accept *= 1 + int(defaults.get("retries", 3))
         done = float(timeout if timeout is not None else self._timeout_of(command)) + accept
         response_id = self.d.packet("RESPONSE").id
         rcmd = self.d.packet("RESPONSE").items

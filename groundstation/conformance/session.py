@@ -6,6 +6,17 @@ from .check import Check
 from .context import Context, Verdict
 
 
+def _another_or_the_line(ctx: Context, v: Verdict):
+    """A second host over TCP; on a serial link (one host) the line itself, which is just
+    as good for what needs no session: the owner's own CONNECT is refused on the
+    dictionary before anything else (§7 step 1), and ABORT takes any token."""
+    if ctx.address.kind == "tcp":
+        v.note("from a second TCP connection (another host, §7)")
+        return ctx.other_host()
+    v.note("on the serial line (a single host there)")
+    return ctx.host
+
+
 def connect_reply(ctx: Context, v: Verdict) -> None:
     """§7/§8: the CONNECT that opened this run's session, and a fresh CONNECT by the owner."""
     h = ctx.host
@@ -31,10 +42,10 @@ def connect_reply(ctx: Context, v: Verdict) -> None:
 def dictionary_mismatch(ctx: Context, v: Verdict) -> None:
     """§8/§7 step 1: a CONNECT with another hash is REJECTED DICTIONARY_MISMATCH, with the
     device's identity in the data."""
-    other = ctx.other_host()
+    other = _another_or_the_line(ctx, v)
     wrong = ctx.d.hash ^ 0xA5A5A5A5
     ex = other.connect(dictionary_hash=wrong, telemetry_port=0)
-    v.note(f"sent CONNECT with dictionary_hash 0x{wrong:08X} from a second connection")
+    v.note(f"sent CONNECT with dictionary_hash 0x{wrong:08X}")
     v.note(f"got {ctx.outcome(ex)}")
     if not v.expect(ctx.refused(ex, 2, "DICTIONARY_MISMATCH"), "REJECTED DICTIONARY_MISMATCH (6)"):
         return
@@ -94,10 +105,10 @@ def take_over(ctx: Context, v: Verdict) -> None:
 
 def abort_always(ctx: Context, v: Verdict) -> None:
     """§7/§9.2: ABORT is accepted from anyone, always, and does not end the session."""
-    other = ctx.other_host()
+    other = _another_or_the_line(ctx, v)
     for token in (0, 0xDEADBEEF):
         ex = other.exchange("ABORT", {}, token=token)
-        v.note(f"sent ABORT with token 0x{token:08X} from a host without the session; "
+        v.note(f"sent ABORT with token 0x{token:08X} (not the session token); "
                f"got {ctx.outcome(ex)}")
         v.expect(ctx.is_ok(ex), "ACCEPTED then COMPLETED")
     mine = ctx.host.exchange("HEARTBEAT", {})

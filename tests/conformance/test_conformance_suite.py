@@ -160,3 +160,25 @@ def test_the_sim_option_names_every_deviation():
     sim = build_parser()._subparsers._group_actions[0].choices["sim"]
     option = next(a for a in sim._actions if "--deviate" in a.option_strings)
     assert tuple(option.choices) == NAMES
+
+
+def test_over_a_serial_line_the_checks_of_other_hosts_skip(capsys):
+    """One serial line is one host: take-over and foreign hosts cannot be tried there
+    (SKIP), everything else runs, telemetry and all, on the one stream."""
+    from groundstation.sim.device import SimulatedDevice
+    from groundstation.sim.pty import PtyMasterStream
+
+    device = SimulatedDevice(pacing="realtime").start()
+    try:
+        pty = PtyMasterStream()
+        device.attach_stream(pty)
+        code = main(["conformance", "--serial", pty.slave_name, "--allow-motion"])
+    finally:
+        device.stop()
+    out = capsys.readouterr().out
+    printed = results(out)
+    assert code == 0, out
+    skipped = {title for status, _, title in printed if status == "SKIP"}
+    assert skipped == {"foreign host refused, token and ownership", "take-over",
+                       "telemetry from the command port"}, out
+    assert "§8" in {section for status, section, _ in printed if status == "PASS"}
