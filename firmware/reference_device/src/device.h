@@ -23,8 +23,10 @@
 /* rig constants of the stand-in (SPEC 10.1 "rig constants"; plant.c explains them) */
 #define PEAK_TORQUE_COARSE 81.3             /* in-oz, P1 */
 #define PEAK_TORQUE_FINE 16.1               /* in-oz, P2 */
-#define TORQUE_CONSTANT_COARSE (81.3 / 2.53)   /* in-oz/A, Kt1: peak torque at the current range */
-#define TORQUE_CONSTANT_FINE (16.1 / 1.0)      /* in-oz/A, Kt2 */
+/* Kt1, Kt2: SPEC 10.1 names them but gives no value; these are the 2-DOF rigs' values
+   from the testbed files in profiles/testbeds (torque_constant) */
+#define TORQUE_CONSTANT_COARSE 32.1         /* in-oz/A, Kt1 */
+#define TORQUE_CONSTANT_FINE 16.1           /* in-oz/A, Kt2 */
 #define FLEXURE_SAFE_DEFLECTION 0.015       /* rad, SPEC 9.2 (2-DOF rigs of today) */
 #define GYRO_FULL_SCALE 17.453              /* rad/s, SPEC 11.2 */
 
