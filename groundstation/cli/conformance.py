@@ -8,7 +8,6 @@ not run (no device, refused session, bad options).
 
 from __future__ import annotations
 
-import argparse
 import sys
 import time
 
@@ -43,8 +42,14 @@ def _cmd_conformance(args) -> int:
     from ..core.errors import GroundStationError
     from ..link.address import parse_address
     from ..conformance import report
-    from ..conformance.runner import run_checks
+    from ..conformance.runner import ALL_CHECKS, run_checks
 
+    if args.only and not any(c.selected_by(args.only) for c in ALL_CHECKS):
+        sections = sorted({c.section for c in ALL_CHECKS},
+                          key=lambda s: [int(x) for x in s[1:].split(".")])
+        print(f"error: --only {' '.join(args.only)} selects no check (sections: "
+              f"{', '.join(sections)}; or a word of a check's title)", file=sys.stderr)
+        return EXIT_CANNOT_RUN
     d = load_dictionary(args.protocol_dir)
     text = f"serial://{args.serial}" if args.serial else args.device
     sim = None

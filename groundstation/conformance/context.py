@@ -7,8 +7,6 @@ import zlib
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-import numpy as np
-
 from ..codec.frames import decode_items
 from ..core.dictionary import Dictionary
 from ..link.address import DeviceAddress
@@ -81,6 +79,11 @@ class Context:
         h = Host(self.d, self.address, udp=udp, counter=self.host._arrivals)
         self._others.append(h)
         return h
+
+    @property
+    def all_hosts(self) -> list[Host]:
+        """This run's session host and the second hosts open now."""
+        return [self.host] + self._others
 
     def close_others(self) -> None:
         for h in self._others:
@@ -210,12 +213,3 @@ def _after(tick: int, ref: int) -> bool:
     """tick is later than ref on the wrapping u32 tick axis."""
     return 0 < ((tick - ref) & 0xFFFFFFFF) < 0x80000000
 
-
-def field_offsets(packet) -> dict[str, tuple[int, np.dtype]]:
-    out, at = {}, 0
-    for item in packet.items:
-        if item.is_variable:
-            break
-        out[item.name] = (at, item.wire_dtype)
-        at += item.wire_dtype.itemsize
-    return out

@@ -73,8 +73,7 @@ def _refusals(ctx: Context):
 def refusals(ctx: Context, v: Verdict) -> None:
     """§6.3: each failed check gives REJECTED with its documented reason, nothing executed."""
     for what, kw, reason, spec in _refusals(ctx):
-        cmd = kw.pop("command")
-        ex = ctx.host.exchange(cmd, **kw)
+        ex = ctx.host.exchange(**kw)
         v.expect(ctx.refused(ex, 2, reason) and len(ex.stages) == 1,
                  f"{what}: got {ctx.outcome(ex)}, expected REJECTED {reason} "
                  f"({ctx.d.error_codes[reason]}) - {spec}")

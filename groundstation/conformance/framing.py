@@ -6,7 +6,7 @@ from __future__ import annotations
 import zlib
 
 from .check import Check
-from .context import Context, Verdict
+from .context import Context, Skip, Verdict
 
 MIN_TICKS = 360              # judge at least this much telemetry (three HOUSEKEEPING periods)
 
@@ -24,7 +24,7 @@ def _enough(ctx: Context) -> None:
 def crc_of_every_packet(ctx: Context, v: Verdict) -> None:
     """§2/§2.1/§4: every frame received in this run, by every host, judged from its bytes."""
     _enough(ctx)
-    hosts = [ctx.host] + ctx._others
+    hosts = ctx.all_hosts
     total = {k: sum(getattr(h.report, k) for h in hosts) for k in
              ("frames", "crc_errors", "version_errors", "unknown_packet_errors",
               "length_errors", "split_frames", "junk_bytes")}
@@ -142,7 +142,6 @@ def housekeeping_contents(ctx: Context, v: Verdict) -> None:
 def telemetry_source(ctx: Context, v: Verdict) -> None:
     """§1.1: UDP telemetry comes from the device's address and command port number."""
     if ctx.address.kind != "tcp" or ctx.host.udp is None:
-        from .context import Skip
         raise Skip("telemetry is on the stream here (serial or ?telemetry=stream)")
     _enough(ctx)
     sources = ctx.host.datagram_sources

@@ -81,7 +81,7 @@ class Host:
     """One host's connection: command stream, telemetry (UDP, or on the stream)."""
 
     def __init__(self, dictionary: Dictionary, address: DeviceAddress, *, udp: bool = True,
-                 log: list[RawFrame] | None = None, counter=None):
+                 counter: "_Counter | None" = None):
         self.d = dictionary
         self.address = address
         self.report = FramingReport()
@@ -239,13 +239,12 @@ class Host:
         if not resend:                   # one frame only: give it all the retries' time
             accept *= 1 + int(defaults.get("retries", 3))
         done = float(timeout if timeout is not None else self._timeout_of(command)) + accept
-        response_id = self.d.packet("RESPONSE").id
-        rcmd = self.d.packet("RESPONSE").items
+        response = self.d.packet("RESPONSE")
         seen = mark
         limit = time.monotonic() + accept
         tries = 0
         while True:
-            f = self.wait_frame(lambda f: f.packet_id == response_id
+            f = self.wait_frame(lambda f: f.packet_id == response.id
                                 and int.from_bytes(f.payload[:4], "big") == seq,
                                 seen, max(0.0, limit - time.monotonic()))
             if f is None:
@@ -256,7 +255,7 @@ class Host:
                     continue
                 return ex
             seen = f.arrival
-            v = decode_items(rcmd, f.payload, "RESPONSE")
+            v = decode_items(response.items, f.payload, "RESPONSE")
             ex.stages.append(Stage(v["stage"], v["reason"], v["data"], f.tick, f.arrival))
             if v["stage"] != 1:
                 return ex

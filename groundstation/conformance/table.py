@@ -45,10 +45,11 @@ def staged_upload(ctx: Context, v: Verdict) -> None:
     """§11.1: BEGIN, WRITE blocks, COMMIT with the CRC activates the table; read-back
     equal; HOUSEKEEPING shows its CRC and version; a second COMMIT finds nothing staged."""
     values = _values(ctx)
-    wd = ctx.d.parameters[[p.name for p in ctx.d.parameters].index("watchdog_timeout")]
-    lo, hi = wd.value_range if getattr(wd, "value_range", None) else (0.05, 10.0)
-    new = float(np.float32(min(hi, values["watchdog_timeout"] + 0.25)
-                           if values["watchdog_timeout"] + 0.25 <= hi else lo + 0.25))
+    lo, hi = next(p.value_range for p in ctx.d.parameters if p.name == "watchdog_timeout")
+    # a quarter second longer (shorter at the top of the range): a change the read-back
+    # shows and that moves nothing while disarmed
+    step = 0.25 if values["watchdog_timeout"] + 0.25 <= hi else -0.25
+    new = float(np.float32(values["watchdog_timeout"] + step))
     values["watchdog_timeout"] = new
     blob = _packed(ctx, values)
     version = ((ctx.found_version or 0) + 1) & 0xFFFF

@@ -148,6 +148,11 @@ def test_an_unreachable_device_is_exit_2_with_a_message(capsys):
     assert "connection refused" in err and "Traceback" not in err
 
 
+def test_an_only_that_selects_nothing_is_exit_2(capsys):
+    assert main(["conformance", "--device", "tcp://127.0.0.1:9", "--only", "42"]) == 2
+    assert "selects no check" in capsys.readouterr().err
+
+
 def test_a_bad_address_is_exit_2(capsys):
     assert main(["conformance", "--device", "ftp://nowhere"]) == 2
     assert "unknown scheme" in capsys.readouterr().err
