@@ -246,7 +246,7 @@ class Recorder:
         self._proc = ctx.Process(target=writer_main, name="gs-log-writer", daemon=True,
                                  args=(self._inbox, self._outbox, str(self._protocol_dir()),
                                        {**self.config, "path": str(path), "run": run}))
-        with _terminal_interrupt_ignored():     # the child starts with SIGINT ignored
+        with _terminal_interrupt_held():        # the child starts with SIGINT held
             self._proc.start()
         deadline = time.monotonic() + timeout
         while True:
@@ -471,19 +471,20 @@ class Recorder:
 
 
 @contextlib.contextmanager
-def _terminal_interrupt_ignored():
-    """Ignore SIGINT while the writer process is spawned, so that it inherits "ignored"
-    from its very first instruction (the writer also ignores it itself, but only once
-    its imports are done).  Only the main thread can change signal handling; elsewhere
-    this does nothing."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN)
+def _terminal_interrupt_held():
+    """Block SIGINT in this thread while the writer process is spawned: the child
+    inherits the blocked mask, so a Ctrl-C reaches it only once the writer has set SIGINT
+    to ignored (writer.ignore_terminal_interrupt unblocks it after that), and never
+    interrupts its start-up.  Blocking, not ignoring: a SIGINT that arrives meanwhile is
+    held for this process (or taken by another of its threads) and raises
+    KeyboardInterrupt once the spawn is done - with SIG_IGN here it was thrown away."""
+    held = {signal.SIGINT}
+    previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
     try:
         yield
     finally:
-        signal.signal(signal.SIGINT, previous)
+        if signal.SIGINT not in previous:
+            signal.pthread_sigmask(signal.SIG_UNBLOCK, held)
 
 
 def _link_record(snap) -> dict[str, Any]:

@@ -32,12 +32,15 @@ from .messages import (Closed, Failed, Flushed, Frames, JournalEntry, Started, S
 
 
 def ignore_terminal_interrupt() -> None:
-    """SIGINT and SIGTERM ignored in this process (the writer: see writer_main)."""
+    """SIGINT and SIGTERM ignored in this process (the writer: see writer_main).  The
+    recorder spawns the writer with SIGINT blocked (recorder._terminal_interrupt_held);
+    it is unblocked here, once ignored, so a Ctrl-C held meanwhile is discarded."""
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
         signal.signal(signal.SIGTERM, signal.SIG_IGN)
     except ValueError:          # not the main thread of the process: nothing to do here
-        pass
+        return
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def _explain(exc: BaseException, path: Path) -> str:
