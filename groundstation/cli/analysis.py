@@ -240,7 +240,27 @@ def _cmd_analyze(args) -> int:
         else:
             print("error: no spectrum to plot (no log could be analysed)", file=sys.stderr)
             failed = True
+    reasons = [(row["log"], row["error"] or
+                f"not computed: {', '.join(m.missing_metrics)}"
+                + (f" ({row['notes']})" if row["notes"] else ""))
+               for (_, m, error), row in zip(results, rows)
+               if row["error"] or (m is not None and m.missing_metrics)]
+    _say_failures(reasons, len(rows), detailed=args.json or args.csv)
     return 1 if failed else 0
+
+
+def _say_failures(reasons: list[tuple[str, str]], total: int, detailed: bool) -> None:
+    """The reason for exit status 1, on stderr: with --json/--csv (stdout is data) each
+    failed log and why; after the printed table, which already says why, their names."""
+    if not reasons:
+        return
+    head = f"error: {len(reasons)} of {total} log(s) could not be analysed"
+    if detailed:
+        print(head + ":", file=sys.stderr)
+        for log, why in reasons:
+            print(f"  {log}: {why}", file=sys.stderr)
+    else:
+        print(f"{head}: {', '.join(log for log, _ in reasons)} (why: above)", file=sys.stderr)
 
 
 def _cmd_batch(args) -> int:
@@ -266,6 +286,13 @@ def _cmd_batch(args) -> int:
     if not paths:
         print("error: no .h5 logs in " + " ".join(args.logs), file=sys.stderr)
         return 2
+    missing = [p for p in paths if not p.exists()]
+    if len(missing) == len(paths):          # say so now, not after starting a Dask cluster
+        print("error: no such log or folder: " + ", ".join(str(p) for p in missing),
+              file=sys.stderr)
+        return 2
+    for p in missing:
+        print(f"note: no such log: {p} (its row says so)", file=sys.stderr)
     options = BatchOptions(metrics=tuple(args.metrics), start_s=args.start, stop_s=args.stop,
                            sensor=args.sensor, integration_period_s=args.integration_period,
                            psd_segment_s=args.psd_segment,
@@ -312,6 +339,8 @@ def _cmd_batch(args) -> int:
               f"{len(failed)} with errors")
         for r in failed:
             print(f"{r['log']}: error: {r['error']}")
+    _say_failures([(r["log"], r["error"]) for r in failed], len(rows),
+                  detailed=args.json or args.csv)
     return 1 if failed else 0
 
 

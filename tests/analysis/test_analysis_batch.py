@@ -186,8 +186,17 @@ def test_cli_serial_with_a_suffix_writes_that_file_only(folder, serial_rows, tmp
 def test_cli_refuses_single_log_options_in_a_batch(folder, capsys):
     assert main(["analyze", str(folder), "--table", "x", "--plot", "p.png"]) == 2
     assert "--plot is for single logs" in capsys.readouterr().err
-    assert main(["analyze", str(folder / "nothing-here.h5"), "--serial"]) == 1
-    assert "nothing-here.h5: error: " in capsys.readouterr().out
+    assert main(["analyze", str(folder / "nothing-here.h5"), "--serial"]) == 2
+    assert "no such log or folder: " in capsys.readouterr().err
+    # with Dask: refused before a cluster is started (it took 21 s to say nothing useful)
+    assert main(["analyze", str(folder / "nothing-here.h5"), "--table", "t"]) == 2
+    assert "nothing-here.h5" in capsys.readouterr().err
+    assert main(["analyze", str(folder / "campaign"), str(folder / "nothing-here.h5"),
+                 "--serial", "--csv", *SENSOR]) == 1
+    out, err = capsys.readouterr()
+    assert "note: no such log: " in err
+    assert "error: 1 of 3 log(s) could not be analysed:" in err
+    assert "nothing-here.h5: " in err and "nothing-here.h5" in out
     assert main(["analyze", str(folder / "campaign/*.txt"), "--serial"]) == 2
     assert "no .h5 logs in" in capsys.readouterr().err
     with pytest.raises(SystemExit):

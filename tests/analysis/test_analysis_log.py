@@ -268,8 +268,10 @@ def test_an_unreadable_log_is_a_row_with_its_error(sim_log, tmp_path, capsys):
     bad = tmp_path / "broken.h5"
     bad.write_bytes(b"")
     assert main(["analyze", str(sim_log), str(bad), "--json", "--psd-segment", "1"]) == 1
-    rows = json.loads(capsys.readouterr().out)
+    out, err = capsys.readouterr()
+    rows = json.loads(out)
     assert [r["log"] for r in rows] == [sim_log.name, "broken.h5"]
+    assert "broken.h5: " in err and "damaged log" in err      # the reason, not only a status
     assert rows[0]["error"] == "" and "damaged log" in rows[1]["error"] and rows[1]["rms_urad"] is None
     assert main(["analyze", str(bad)]) == 1
     out = capsys.readouterr().out
@@ -335,3 +337,13 @@ def test_a_window_off_the_range_is_not_valid(sim_log):
     assert m.row(max_excluded_fraction=1.0)["valid"] is True
     clean = analyze_log(sim_log, stop_s=1.5).row()
     assert clean["valid"] is True and clean["excluded_fraction"] == 0.0 and clean["invalid_reason"] == ""
+
+
+def test_a_figure_that_cannot_be_computed_says_why_on_stderr_with_csv(sim_log, capsys):
+    """--csv puts the rows on stdout; the reason for exit status 1 (a PSD segment longer
+    than the log) must not hide in the notes column only."""
+    assert main(["analyze", str(sim_log), "--csv", "--psd-segment", "1000"]) == 1
+    out, err = capsys.readouterr()
+    assert sim_log.name in out
+    assert "error: 1 of 1 log(s) could not be analysed:" in err
+    assert f"{sim_log.name}: not computed: psd" in err

@@ -123,12 +123,18 @@ def test_a_log_without_a_step_is_a_row_with_the_error(logs, capsys):
         step_from_log(logs["noise"])
     assert main(["analyze", str(logs["noise"]), str(logs["step"]), "--metrics", "step",
                  "--json"]) == 1
-    rows = json.loads(capsys.readouterr().out)
+    out, err = capsys.readouterr()
+    rows = json.loads(out)
     assert rows[0]["error"].startswith("step: ") and "makes no step" in rows[0]["error"]
+    # stdout is data: the reason for exit status 1 is on stderr too
+    assert "error: 1 of 2 log(s) could not be analysed:" in err
+    assert f"{logs['noise'].name}: step: " in err and "makes no step" in err
     assert rows[0]["step_rise_s"] is None
     assert rows[1]["error"] == "" and rows[1]["step_rise_s"] > 0          # the other goes on
     assert main(["analyze", str(logs["noise"]), "--metrics", "step"]) == 1
-    assert f"{logs['noise'].name}: step: error: " in capsys.readouterr().out
+    out, err = capsys.readouterr()
+    assert f"{logs['noise'].name}: step: error: " in out
+    assert f"error: 1 of 1 log(s) could not be analysed: {logs['noise'].name}" in err
 
 
 def test_hysteresis_of_a_triangle_writes_the_slope_table(tmp_path, capsys):
