@@ -43,6 +43,15 @@ def crc_of_every_packet(ctx: Context, v: Verdict) -> None:
     v.note("§2.1: CRC-32/ISO-HDLC over bytes 0 .. 13+length, sent least significant byte first")
 
 
+def _within_sessions(ctx: Context, frames):
+    """Consecutive pairs of frames that no session change lies between: telemetry pauses
+    with no session open (§1.3), and a pause is not a rate."""
+    breaks = ctx.host.session_breaks
+    for a, b in zip(frames, frames[1:]):
+        if not any(a.arrival <= m < b.arrival for m in breaks):
+            yield a, b
+
+
 def sequence_numbers(ctx: Context, v: Verdict) -> None:
     """§2: one counter per packet, +1 per frame sent, wrapping; a gap only for frames lost
     in transit (and never more than the ticks elapsed for HIGH_RATE)."""
@@ -52,11 +61,12 @@ def sequence_numbers(ctx: Context, v: Verdict) -> None:
         mine = [f for f in frames if f.packet_id == ctx.ids[name]]
         backward = gaps = 0
         bad_tick = 0
+        within = set(id(a) for a, _ in _within_sessions(ctx, mine))
         for a, b in zip(mine, mine[1:]):
             step = (b.sequence - a.sequence) & 0xFFFFFFFF
             if step == 0 or step >= 0x80000000:
                 backward += 1
-            elif step > 1:
+            elif step > 1 and id(a) in within:   # across a session change: not judged
                 gaps += step - 1
             if name == "HIGH_RATE" and 0 < step < 0x80000000:
                 dt = (b.tick - a.tick) & 0xFFFFFFFF
@@ -84,7 +94,7 @@ def rates(ctx: Context, v: Verdict) -> None:
     frames = ctx.host.since(0)
     hr = [f for f in frames if f.packet_id == ctx.ids["HIGH_RATE"]]
     per = {}
-    for a, b in zip(hr, hr[1:]):
+    for a, b in _within_sessions(ctx, hr):
         if (b.sequence - a.sequence) & 0xFFFFFFFF == 1:
             d = (b.tick - a.tick) & 0xFFFFFFFF
             per[d] = per.get(d, 0) + 1
@@ -93,7 +103,7 @@ def rates(ctx: Context, v: Verdict) -> None:
     every = round(ctx.rate / ctx.hk.rate_hz)
     hk = [f for f in frames if f.packet_id == ctx.ids["HOUSEKEEPING"]]
     steps = {}
-    for a, b in zip(hk, hk[1:]):
+    for a, b in _within_sessions(ctx, hk):
         if (b.sequence - a.sequence) & 0xFFFFFFFF == 1:
             d = (b.tick - a.tick) & 0xFFFFFFFF
             steps[d] = steps.get(d, 0) + 1

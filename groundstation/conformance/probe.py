@@ -281,7 +281,17 @@ class Host:
             "take_over": int(take_over)}, token=0)
         if ex.final is not None and ex.final.stage == 3:
             self.token = self.reply(ex, "CONNECT")["session_token"]
+            self.session_changed()
         return ex
+
+    def session_changed(self) -> None:
+        """Mark where a session began or ended: telemetry may pause there (§1.3), so
+        rates are not judged across it."""
+        self._arrivals.breaks.append(self._arrivals.now())
+
+    @property
+    def session_breaks(self) -> list[int]:
+        return list(self._arrivals.breaks)
 
     def pause_heartbeat(self, paused: bool = True) -> None:
         if paused:
@@ -313,6 +323,8 @@ class _Counter:
     def __init__(self) -> None:
         self._n = 0
         self._lock = threading.Lock()
+        #: arrival numbers at which a session began or ended (Host.session_changed)
+        self.breaks: list[int] = []
 
     def next(self) -> int:
         with self._lock:

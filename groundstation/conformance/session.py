@@ -115,10 +115,40 @@ def abort_always(ctx: Context, v: Verdict) -> None:
     v.expect(ctx.is_ok(mine), f"the session survives ABORT: owner's HEARTBEAT {ctx.outcome(mine)}")
 
 
+def disconnect_ends_session(ctx: Context, v: Verdict) -> None:
+    """§7 ending a session / §1.3: DISCONNECT completes, the token dies ('no session
+    open'), and over Ethernet the telemetry stops."""
+    h = ctx.host
+    token = h.token
+    ex = h.exchange("DISCONNECT", {})
+    v.note(f"sent DISCONNECT: {ctx.outcome(ex)}")
+    if not v.expect(ctx.is_ok(ex), "ACCEPTED then COMPLETED, on the command connection"):
+        return
+    h.token = 0                       # no heartbeats without a session
+    h.session_changed()
+    end = ex.final.tick
+    hb = h.exchange("HEARTBEAT", {}, token=token)
+    text = hb.final.data.decode("utf-8", "replace") if hb.final else ""
+    v.expect(ctx.refused(hb, 2, "NOT_SESSION_OWNER") and text == "no session open",
+             f"the old token afterwards: {ctx.outcome(hb)}, data {text!r} (expected "
+             f"NOT_SESSION_OWNER, 'no session open')")
+    if ctx.address.kind == "tcp":
+        # frames produced after the session ended (a tick or two of slack for the period
+        # in which DISCONNECT ran); waiting for an absence needs a deadline: half a second
+        late = h.wait_frame(lambda f: f.packet_id in (ctx.ids["HIGH_RATE"], ctx.ids["HOUSEKEEPING"])
+                            and 2 < ((f.tick - end) & 0xFFFFFFFF) < 0x80000000, h.mark(), 0.5)
+        v.expect(late is None, "§1.3: no telemetry produced after the session ended"
+                 + (f" (got packet 0x{late.packet_id:02X} of tick {late.tick}, DISCONNECT at "
+                    f"{end})" if late else ""))
+    back = h.connect()
+    v.expect(ctx.is_ok(back), f"a new CONNECT opens a session again: {ctx.outcome(back)}")
+
+
 CHECKS = [
     Check("§7", "CONNECT reply and fresh session on the owner's connection", connect_reply),
     Check("§8", "dictionary hash mismatch refused at CONNECT", dictionary_mismatch),
     Check("§7", "foreign host refused, token and ownership", foreign_host_refused),
     Check("§7", "take-over", take_over),
     Check("§7", "ABORT always accepted", abort_always),
+    Check("§7", "DISCONNECT ends the session and its telemetry", disconnect_ends_session),
 ]
