@@ -29,6 +29,7 @@ from pathlib import Path
 from ..core.kinds import GeneratorChoice
 from ..core.errors import GroundStationError
 from . import arguments
+from .station import status_for
 
 EXIT_OK, EXIT_FAILED, EXIT_MALFORMED = 0, 1, 2
 EXIT_INTERRUPTED = 130            # 128 + SIGINT, as a shell reports Ctrl-C
@@ -256,6 +257,8 @@ def _cmd_run(args) -> int:
               "switched off", file=sys.stderr)
     except GroundStationError as exc:
         print(f"error: {exc}", file=sys.stderr)
+        if report is None:
+            return status_for(exc)      # 2: the device was not reached, nothing ran
     if report is None:
         return EXIT_INTERRUPTED if interrupted else EXIT_FAILED
     report.setup = setup

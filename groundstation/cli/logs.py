@@ -47,7 +47,7 @@ def _cmd_record(args) -> int:
                 # a log that got nothing is removed (Recorder.stop says so in its note)
                 kept = (f"the log {path} is closed with that reason" if not st.removed
                         else st.note or f"nothing was recorded: {path} removed")
-                print(f"error: {exc}\n{kept}", flush=True)
+                print(f"error: {exc}\n{kept}", file=sys.stderr, flush=True)
                 return EXIT_REFUSED
             if args.notes:
                 rec.note(args.notes)
@@ -73,7 +73,7 @@ def _record_loop(args, rec, keeper, client: DeviceLink, stop, failures,
     t_end = time.monotonic() + args.duration if args.duration else None
     while True:
         if failures:
-            print(f"error: {failures[0]}", flush=True)
+            print(f"error: {failures[0]}", file=sys.stderr, flush=True)
             return EXIT_FAILED, failures[0]
         ending = keeper.keep_up(stop.event, reconnect=not args.no_reconnect, on_event=journal)
         if ending is not None:

@@ -24,7 +24,7 @@ import argparse
 import sys
 
 from . import arguments
-from .station import add_device_options, command_station, fail, print_progress
+from .station import add_device_options, command_station, fail, print_progress, status_for
 from ..core.errors import GroundStationError
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
@@ -132,7 +132,7 @@ def _cmd_upload(args) -> int:
                   f"{record.activated_tick} (previous {record.previous_crc:08x}); read back bit for "
                   f"bit, HOUSEKEEPING agrees")
     except GroundStationError as exc:
-        return fail(str(exc))
+        return fail(str(exc), status_for(exc))
     return EXIT_OK
 
 
@@ -183,7 +183,7 @@ def _cmd_show(args) -> int:
                 print(f"{len(differ)} entr{'y differs' if len(differ) == 1 else 'ies differ'}: "
                       + ", ".join(differ))
     except GroundStationError as exc:
-        return fail(str(exc))
+        return fail(str(exc), status_for(exc))
     return EXIT_OK
 
 
@@ -202,7 +202,7 @@ def _cmd_rollback(args) -> int:
             print(f"rolled back: table {record.crc:08x} active again (was {record.previous_crc:08x}), "
                   f"verified")
     except GroundStationError as exc:
-        return fail(str(exc))
+        return fail(str(exc), status_for(exc))
     return EXIT_OK
 
 

@@ -19,7 +19,7 @@ import sys
 
 from ..core.kinds import ProfileOrigin
 from . import arguments
-from .station import add_device_options, fail, print_progress
+from .station import add_device_options, fail, print_progress, status_for
 from ..core.errors import GroundStationError
 
 EXIT_OK, EXIT_REFUSED, EXIT_UNREADABLE = 0, 1, 2
@@ -199,5 +199,6 @@ def _cmd_play(args) -> int:
     except GroundStationError as exc:
         progress.done()
         player = players[0] if players else None
-        return fail(f"{exc}" + (f"; {_safety(player)}" if player is not None and player.made_safe else ""))
+        return fail(f"{exc}" + (f"; {_safety(player)}" if player is not None and player.made_safe else ""),
+                    status_for(exc))
     return EXIT_OK

@@ -10,12 +10,23 @@ from typing import Iterator
 
 #: the exit status of a command that refused or failed (the device was left safe)
 EXIT_REFUSED = 1
+#: ... and of one that could not start: bad input, or the device not reachable at all
+EXIT_CANNOT_START = 2
 
 
 def fail(text: str, code: int = EXIT_REFUSED) -> int:
     """Say why a command stops, on stderr, and return its exit status."""
     print(f"error: {text}", file=sys.stderr)
     return code
+
+
+def status_for(exc: BaseException) -> int:
+    """The exit status for an error that stopped a device command: 2 when the device could
+    not be reached at all (nothing was sent: as `monitor` and `record` say it), 1 when it
+    refused or failed on the way."""
+    from ..core.errors import DeviceUnreachableError
+
+    return EXIT_CANNOT_START if isinstance(exc, DeviceUnreachableError) else EXIT_REFUSED
 
 
 def print_progress(step: str, fraction: float) -> None:

@@ -54,6 +54,11 @@ class LinkLostError(LinkError):
     """An open transport went away (cable pulled, serial adapter unplugged, peer closed)."""
 
 
+class DeviceUnreachableError(LinkError):
+    """The device could not be reached at all - refused, no answer, no such port - so
+    nothing was sent to it.  Every command exits with status 2 for it (cli/exit_status)."""
+
+
 # --- commands --------------------------------------------------------------------------
 class CommandError(GroundStationError):
     """A command did not complete."""

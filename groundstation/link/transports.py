@@ -16,7 +16,7 @@ import time
 
 import serial
 
-from ..core.errors import LinkError, LinkLostError, PortInUseError
+from ..core.errors import DeviceUnreachableError, LinkError, LinkLostError, PortInUseError
 
 log = logging.getLogger(__name__)
 
@@ -97,13 +97,13 @@ class TcpStream(StreamTransport):
             try:
                 sock = socket.create_connection((host, port), timeout=connect_timeout)
             except ConnectionRefusedError:
-                raise LinkError(f"{self.name}: connection refused - is the controller (or "
+                raise DeviceUnreachableError(f"{self.name}: connection refused - is the controller (or "
                                 f"`groundstation sim`) running and listening on port {port}?") from None
             except socket.timeout:
-                raise LinkError(f"{self.name}: no answer within {connect_timeout} s - check "
+                raise DeviceUnreachableError(f"{self.name}: no answer within {connect_timeout} s - check "
                                 f"the address, cable and firewall") from None
             except OSError as exc:
-                raise LinkError(f"{self.name}: cannot connect ({exc.strerror or exc})") from None
+                raise DeviceUnreachableError(f"{self.name}: cannot connect ({exc.strerror or exc})") from None
         sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
         self._sock = sock
         try:    # the device's address as the socket sees it: telemetry must come from it
@@ -150,8 +150,9 @@ class SerialStream(StreamTransport):
                 self._ser = serial.serial_for_url(port, baudrate=baudrate, timeout=0.1,
                                                   write_timeout=1.0)
         except serial.SerialException as exc:
-            raise LinkError(f"{self.name}: cannot open ({exc}) - is the adapter plugged in "
-                            f"and do you have permission (group 'dialout')?") from None
+            raise DeviceUnreachableError(f"{self.name}: cannot open ({exc}) - is the adapter "
+                                         f"plugged in and do you have permission (group "
+                                         f"'dialout')?") from None
 
     def _write(self, data: bytes) -> None:
         try:

@@ -410,7 +410,8 @@ class Recorder:
         self.removed = list(self.files)
         self.removal_note = (f"removed {', '.join(str(p) for p in self.files)}: nothing was "
                              "recorded, so no log is kept")
-        log.warning(self.removal_note)
+        # info, not warning: every caller shows the note itself (it was printed twice)
+        log.info(self.removal_note)
 
     def _kill(self) -> None:
         if self._proc is not None and self._proc.is_alive():

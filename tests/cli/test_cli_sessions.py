@@ -139,9 +139,9 @@ def test_a_refused_connect_leaves_a_closed_log_that_says_why(live_device, dictio
         owner.connect()
         code = main(["record", "--device", f"tcp://127.0.0.1:{live_device.tcp_port}",
                      "--folder", str(tmp_path), "--duration", "5"])
-    out = capsys.readouterr().out
+    err = capsys.readouterr().err
     assert code == 2
-    assert "SESSION_BUSY" in out
+    assert "SESSION_BUSY" in err            # the reason for a non-zero exit: on stderr
     stop = closing_record(only_log(tmp_path))
     assert stop["reason"].startswith("connect failed:") and "SESSION_BUSY" in stop["reason"]
 
