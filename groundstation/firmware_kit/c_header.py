@@ -10,7 +10,7 @@ import zlib
 from ..core.dictionary import CRC_SIZE, FRAME_OVERHEAD, HEADER_DTYPE, HEADER_SIZE, Dictionary, Item
 from . import c_templates as T
 from .layout import (C_TYPES, Record, c_double, c_number, c_string, check_unique, comment, conversion_text,
-                     default_table, hex_u, lower, macro, record)
+                     default_table, hex_u, lower, macro, max_dims, record)
 
 CRC_POLY_REFLECTED = 0xEDB88320
 CRC_INIT = CRC_XOROUT = 0xFFFFFFFF
@@ -244,6 +244,8 @@ def parameter_defines(d: Dictionary) -> list[str]:
             out.append(define(f"{m}_DEFAULT", c_number(p.default, p.type)))
         offset += count * C_TYPES[p.type][1]
     out.append(define("HFB_PARAM_TABLE_SIZE", f"{offset}u", "PARAM_BEGIN's table_length"))
+    out.append(define("HFB_PARAM_ENTRIES", f"{len(d.parameters)}u", "entries of hfb_params[]"))
+    out.append(define("HFB_PARAM_MAX_DIMS", f"{max_dims(d)}u", "length of hfb_param_info_t.shape"))
     out.append(define("HFB_PARAM_DEFAULT_TABLE_CRC", hex_u(zlib.crc32(default_table(d)), 8),
                       "CRC-32 of the table of defaults"))
     out.append("/* the table of all defaults: the active table at boot, version 0 (SPEC.md 11.1) */")

@@ -6,7 +6,8 @@ from __future__ import annotations
 from ..core.dictionary import Dictionary
 from . import c_templates as T
 from .c_header import CRC_POLY_REFLECTED, Layouts
-from .layout import Record, default_table, lower, macro, record
+from .layout import (C_TYPES, Record, c_bound, c_number, c_string, default_table, lower, macro, max_dims,
+                     record, type_enum)
 
 
 def crc_table() -> list[int]:
@@ -47,13 +48,45 @@ def limits_block(d: Dictionary) -> str:
     return "\n".join(lines)
 
 
+def _arg_rows(c) -> tuple[list[str], str]:
+    """The states arrays and the hfb_arg_info_t array of one command's arguments; the
+    C name of the latter ("NULL" when the command has no arguments)."""
+    if not c.args:
+        return [], "NULL"
+    rec = record(c.args)
+    offsets = {f.item.name: f.offset for f in rec.fields}
+    base = lower("hfb_args", c.name)
+    lines, rows = [], []
+    for item in c.args:
+        offset = offsets.get(item.name, rec.fixed_size)
+        states = "NULL"
+        if item.states:
+            states = lower("hfb_states", c.name, item.name)
+            values = ", ".join(c_number(v, "i64") for v in item.states.values())
+            lines.append(f"static const int64_t {states}[{len(item.states)}] = {{{values}}};")
+        if item.value_range is not None:
+            lo, hi = (c_bound(v, item.type) for v in item.value_range)
+        else:
+            lo = hi = "0.0"
+        rows.append(f"    {{{c_string(item.name)}, {type_enum(item.type)}, {offset}u, "
+                    f"{int(item.value_range is not None)}u, {lo}, {hi}, {len(item.states)}u, {states}, "
+                    f"{c_string(item.units)}}},")
+    lines += [f"static const hfb_arg_info_t {base}[{len(c.args)}] = {{", *rows, "};"]
+    return lines, base
+
+
 def commands_block(d: Dictionary) -> str:
-    lines = ["static const hfb_command_info_t hfb_commands[] = {"]
+    lines = ["/* every command's arguments in wire order: what check 4 of SPEC.md 6.3 loops over */"]
+    entries = []
     for c in d.commands:
+        arg_lines, arg_table = _arg_rows(c)
+        lines += arg_lines
         args, reply = record(c.args), record(c.reply)
-        lines.append(f'    {{"{c.name}", {macro("HFB_CMD", c.name, "OPCODE")}, {args.fixed_size}u, '
-                     f"{int(args.variable is not None)}u, {reply.fixed_size}u, "
-                     f"{int(reply.variable is not None)}u, {int(c.needs_session)}u, {int(c.critical)}u}},")
+        entries.append(f'    {{"{c.name}", {macro("HFB_CMD", c.name, "OPCODE")}, {args.fixed_size}u, '
+                       f"{int(args.variable is not None)}u, {reply.fixed_size}u, "
+                       f"{int(reply.variable is not None)}u, {int(c.needs_session)}u, {int(c.critical)}u, "
+                       f"{len(c.args)}u, {arg_table}}},")
+    lines += ["", "static const hfb_command_info_t hfb_commands[] = {", *entries]
     lines += ["};", "",
               "const hfb_command_info_t *hfb_command_info(uint16_t opcode)", "{",
               "    size_t i;",
@@ -103,6 +136,28 @@ def pack_functions(base: str, prefix: str, rec: Record) -> str:
     return "\n".join(lines)
 
 
+def params_block(d: Dictionary) -> str:
+    """hfb_params[]: the entries in id order with their offsets, as SPEC.md 11.1 packs."""
+    dims = max_dims(d)
+    lines = ["/* the parameter table's entries in id (= table) order: what validation and",
+             " * activation loop over */",
+             "const hfb_param_info_t hfb_params[HFB_PARAM_ENTRIES] = {"]
+    offset = 0
+    for p in d.parameters:
+        count = 1
+        for n in p.shape:
+            count *= n
+        size = C_TYPES[p.type][1]
+        shape = ", ".join(f"{n}u" for n in list(p.shape) + [0] * (dims - len(p.shape)))
+        lo, hi = (c_bound(v, p.type) for v in p.value_range)
+        lines.append(f"    {{{p.id}u, {c_string(p.name)}, {type_enum(p.type)}, {size}u, {offset}u, "
+                     f"{count}u, {len(p.shape)}u, {{{shape}}}, {lo}, {hi}, {int(p.filter == 'sos')}u, "
+                     f"hfb_param_default_table + {offset}, {c_string(p.units)}}},")
+        offset += count * size
+    lines.append("};")
+    return "\n".join(lines)
+
+
 def default_table_block(d: Dictionary) -> str:
     data = default_table(d)
     lines = ["/* the parameter table of all defaults (SPEC.md 11.1), big-endian as on the wire */",
@@ -115,7 +170,7 @@ def default_table_block(d: Dictionary) -> str:
 def source_text(d: Dictionary, name: str) -> str:
     parts = [T.SOURCE_TOP.substitute(name=name, protocol=d.name, version=d.version,
                                      hash_hex=f"{d.hash:08X}").rstrip("\n"),
-             crc_block(), limits_block(d), commands_block(d), T.CODEC.rstrip("\n"),
+             crc_block(), limits_block(d), commands_block(d), params_block(d), T.CODEC.rstrip("\n"),
              "/* ---- pack/unpack: native struct <-> big-endian bytes, offsets from the header ---- */"]
     for base, prefix, rec, title in Layouts(d).records:
         parts.append(f"/* {title} */\n" + pack_functions(base, prefix, rec))

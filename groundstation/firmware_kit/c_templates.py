@@ -240,10 +240,46 @@ typedef struct {
 
 int hfb_frame_view(const uint8_t *frame, size_t length, hfb_frame_view_t *view);
 
+/* ---- values described by the dictionary ---------------------------------------------
+ * The tables below (command arguments, parameter entries) name each value's wire type,
+ * so firmware can loop over them instead of listing every entry by hand: a new entry in
+ * the TOML then needs a new export, not a new line of firmware.
+ *
+ * hfb_value_get(type, p): the value at p read in its wire type, as a double (exact but
+ * for 64-bit integers beyond 2^53; 0 for str/bytes).
+ * hfb_value_in_range(type, p, min, max): 1 if the value at p is finite and within
+ * [min, max] compared in its own type (SPEC.md 3.2): integers exactly, f64 in double,
+ * f32 in float - the bounds of f32 values in the tables are already rounded to float,
+ * so the double comparison made here gives the float comparison's answer. */
+typedef enum {
+    HFB_TYPE_U8, HFB_TYPE_I8, HFB_TYPE_U16, HFB_TYPE_I16, HFB_TYPE_U32, HFB_TYPE_I32,
+    HFB_TYPE_U64, HFB_TYPE_I64, HFB_TYPE_F32, HFB_TYPE_F64, HFB_TYPE_STR, HFB_TYPE_BYTES
+} hfb_type_t;
+
+double hfb_value_get(hfb_type_t type, const uint8_t *p);
+int hfb_value_in_range(hfb_type_t type, const uint8_t *p, double min, double max);
+
 /* ---- commands ------------------------------------------------------------------------
- * hfb_command_info(opcode): what commands.toml says about a command, for the generic
- * checks of SPEC.md 6.3 (1: known opcode, 2: argument length, 3: session token); NULL
- * for an opcode that is not in the dictionary (REJECTED UNKNOWN_COMMAND). */
+ * hfb_command_info(opcode): what commands.toml says about a command, for the checks of
+ * SPEC.md 6.3 (1: known opcode, 2: argument length, 3: session token, 4: each argument
+ * in args[] with hfb_arg_valid); NULL for an opcode that is not in the dictionary
+ * (REJECTED UNKNOWN_COMMAND).
+ *
+ * hfb_arg_valid(arg, arguments): check 4 for one argument of a command's argument
+ * bytes (their length already checked): finite if a float, within its range if it has
+ * one, one of its states if it has states.  Command-specific bounds (an offset within
+ * the staged size, PARAM_BEGIN's table length) stay the firmware's. */
+typedef struct {
+    const char *name;
+    hfb_type_t type;
+    uint16_t offset;           /* in the argument bytes; str/bytes: where the rest begins */
+    uint8_t has_range;         /* 1: min and max apply */
+    double min, max;           /* the range; f32 ones rounded to float (SPEC.md 3.2) */
+    uint8_t state_count;       /* 0: no states; else the value must be one of states[] */
+    const int64_t *states;
+    const char *units;
+} hfb_arg_info_t;
+
 typedef struct {
     const char *name;
     uint16_t opcode;
@@ -253,9 +289,37 @@ typedef struct {
     uint8_t reply_variable;
     uint8_t needs_session;     /* 1: the session token must match */
     uint8_t critical;          /* 1: the host asks its operator first (informative) */
+    uint8_t arg_count;         /* entries of args[], in wire order (the variable one last) */
+    const hfb_arg_info_t *args;
 } hfb_command_info_t;
 
 const hfb_command_info_t *hfb_command_info(uint16_t opcode);
+int hfb_arg_valid(const hfb_arg_info_t *arg, const uint8_t *arguments);
+
+/* ---- the parameter table's entries ---------------------------------------------------
+ * hfb_params[]: every entry of parameters.toml in increasing id order, i.e. in table
+ * order (SPEC.md 11.1).  Element k of entry e is at table + e->offset +
+ * k * e->element_size, row-major; validation rules 1 and 2 of SPEC.md 11.1 for it are
+ * hfb_value_in_range(e->type, that pointer, e->min, e->max).  e->defaults points at the
+ * entry's bytes in hfb_param_default_table.  hfb_param_info(id): the entry with that
+ * id, or NULL. */
+typedef struct {
+    uint16_t id;
+    const char *name;
+    hfb_type_t type;
+    uint8_t element_size;      /* bytes of one element */
+    uint32_t offset;           /* byte offset of element 0 in the table */
+    uint32_t count;            /* elements: the product of the shape, 1 for a scalar */
+    uint8_t dims;              /* 0 scalar, 1 [n], 2 [rows, cols], ... */
+    uint32_t shape[HFB_PARAM_MAX_DIMS];   /* the first `dims` are used */
+    double min, max;           /* the range of every element; f32 ones rounded to float */
+    uint8_t sos;               /* 1: filter = "sos", rows b0 b1 b2 a0 a1 a2 (rule 3) */
+    const uint8_t *defaults;   /* big-endian, in hfb_param_default_table */
+    const char *units;
+} hfb_param_info_t;
+
+extern const hfb_param_info_t hfb_params[HFB_PARAM_ENTRIES];
+const hfb_param_info_t *hfb_param_info(uint16_t id);
 
 /* ---- stream deframer (SPEC.md 4.1) -------------------------------------------------
  * Finds frames in a byte stream (the TCP command connection, a serial line) with the
@@ -271,7 +335,20 @@ const hfb_command_info_t *hfb_command_info(uint16_t opcode);
  * the same deframer.  Any number of bytes may be fed at once: a feed larger than the
  * buffer is scanned in pieces with the same result.  HFB_DEFRAMER_CAPACITY (at least
  * one largest frame) may be set on the compiler's command line, the same for every
- * file.  Counters are 32 bits and wrap. */
+ * file.  Counters are 32 bits and wrap.
+ *
+ * Frames of another major version.  The header check drops a candidate whose version
+ * byte differs (counted in version_errors), yet SPEC.md 7 asks a device to answer a
+ * CONNECT in such a frame with REJECTED DICTIONARY_MISMATCH.  So, optionally:
+ *     hfb_deframer_on_other_version(&rx, on_other);  (after init; same context)
+ * on_other(context, frame, length) then also gets each such candidate whose whole span
+ * (its length field + HFB_FRAME_OVERHEAD, at most HFB_MAX_FRAME) arrived with a good
+ * CRC - the header and the CRC keep their layout in every major version (SPEC.md 7);
+ * the packet id and length rules are the other version's, so it checks them itself.
+ * Framing is unchanged by it: the candidate is still a version error, its bytes junk,
+ * and the scan goes on after its first byte, so the counters stay the host's.  A span
+ * that is not complete yet is copied aside (other[], one at a time) until it is; the
+ * frame handed over points into the buffer or into other[], valid during the call. */
 #ifndef HFB_DEFRAMER_CAPACITY
 #define HFB_DEFRAMER_CAPACITY (2u * HFB_MAX_FRAME)
 #endif
@@ -298,9 +375,14 @@ typedef struct {
     void *context;
     size_t held;                      /* bytes waiting in buffer[] */
     uint8_t buffer[HFB_DEFRAMER_CAPACITY];
+    hfb_frame_handler_t on_other_version;   /* NULL: frames of another version just dropped */
+    size_t other_held;                /* bytes of an incomplete other-version frame in other[] */
+    size_t other_total;               /* its whole length; 0: none being collected */
+    uint8_t other[HFB_MAX_FRAME];
 } hfb_deframer_t;
 
 void hfb_deframer_init(hfb_deframer_t *deframer, hfb_frame_handler_t on_frame, void *context);
+void hfb_deframer_on_other_version(hfb_deframer_t *deframer, hfb_frame_handler_t on_other);
 void hfb_deframer_feed(hfb_deframer_t *deframer, const uint8_t *data, size_t n);
 /* end of stream (connection closed): decode what can be, count the rest as junk */
 void hfb_deframer_flush(hfb_deframer_t *deframer);
@@ -386,12 +468,204 @@ int hfb_frame_view(const uint8_t *frame, size_t length, hfb_frame_view_t *view)
     return (size_t)view->length + HFB_FRAME_OVERHEAD == length ? 0 : -1;
 }
 
+/* ---- values described by the dictionary -------------------------------------------- */
+double hfb_value_get(hfb_type_t type, const uint8_t *p)
+{
+    switch (type) {
+    case HFB_TYPE_U8: return (double)hfb_get_u8(p);
+    case HFB_TYPE_I8: return (double)hfb_get_i8(p);
+    case HFB_TYPE_U16: return (double)hfb_get_u16(p);
+    case HFB_TYPE_I16: return (double)hfb_get_i16(p);
+    case HFB_TYPE_U32: return (double)hfb_get_u32(p);
+    case HFB_TYPE_I32: return (double)hfb_get_i32(p);
+    case HFB_TYPE_U64: return (double)hfb_get_u64(p);
+    case HFB_TYPE_I64: return (double)hfb_get_i64(p);
+    case HFB_TYPE_F32: return (double)hfb_get_f32(p);
+    case HFB_TYPE_F64: return hfb_get_f64(p);
+    case HFB_TYPE_STR:
+    case HFB_TYPE_BYTES:
+    default:
+        return 0.0;
+    }
+}
+
+/* v >= b and v <= b for 64-bit integers, exactly: converting v to double would round
+   above 2^53.  t is b truncated toward zero, exact once b is known to be in range. */
+static int hfb_i64_at_least(int64_t v, double b)
+{
+    int64_t t;
+    if (b <= -9223372036854775808.0) {
+        return 1;
+    }
+    if (b >= 9223372036854775808.0) {
+        return 0;
+    }
+    t = (int64_t)b;
+    return v > t || (v == t && (double)t >= b);
+}
+
+static int hfb_i64_at_most(int64_t v, double b)
+{
+    int64_t t;
+    if (b >= 9223372036854775808.0) {
+        return 1;
+    }
+    if (b < -9223372036854775808.0) {
+        return 0;
+    }
+    t = (int64_t)b;
+    return v < t || (v == t && (double)t <= b);
+}
+
+static int hfb_u64_at_least(uint64_t v, double b)
+{
+    uint64_t t;
+    if (b <= 0.0) {
+        return 1;
+    }
+    if (b >= 18446744073709551616.0) {
+        return 0;
+    }
+    t = (uint64_t)b;
+    return v > t || (v == t && (double)t >= b);
+}
+
+static int hfb_u64_at_most(uint64_t v, double b)
+{
+    uint64_t t;
+    if (b >= 18446744073709551616.0) {
+        return 1;
+    }
+    if (b < 0.0) {
+        return 0;
+    }
+    t = (uint64_t)b;
+    return v < t || (v == t && (double)t <= b);
+}
+
+int hfb_value_in_range(hfb_type_t type, const uint8_t *p, double min, double max)
+{
+    double v;
+    switch (type) {
+    case HFB_TYPE_U64:
+        return hfb_u64_at_least(hfb_get_u64(p), min) && hfb_u64_at_most(hfb_get_u64(p), max);
+    case HFB_TYPE_I64:
+        return hfb_i64_at_least(hfb_get_i64(p), min) && hfb_i64_at_most(hfb_get_i64(p), max);
+    case HFB_TYPE_F32:
+        /* NaN and infinities by their bits: no math.h, and immune to fast-math flags */
+        if ((hfb_get_u32(p) & 0x7F800000u) == 0x7F800000u) {
+            return 0;
+        }
+        break;
+    case HFB_TYPE_F64:
+        if ((hfb_get_u64(p) & 0x7FF0000000000000ull) == 0x7FF0000000000000ull) {
+            return 0;
+        }
+        break;
+    case HFB_TYPE_STR:
+    case HFB_TYPE_BYTES:
+        return 1;                 /* no range applies to text or raw bytes */
+    default:
+        break;                    /* integers of up to 32 bits are exact in a double */
+    }
+    v = hfb_value_get(type, p);
+    return v >= min && v <= max;
+}
+
+int hfb_arg_valid(const hfb_arg_info_t *arg, const uint8_t *arguments)
+{
+    const uint8_t *p = arguments + arg->offset;
+    uint8_t k;
+    if (arg->type == HFB_TYPE_STR || arg->type == HFB_TYPE_BYTES) {
+        return 1;
+    }
+    if (arg->has_range) {
+        if (!hfb_value_in_range(arg->type, p, arg->min, arg->max)) {
+            return 0;
+        }
+    } else if (!hfb_value_in_range(arg->type, p, -DBL_MAX, DBL_MAX)) {
+        return 0;                 /* a float without a range must still be finite */
+    }
+    if (arg->state_count == 0u) {
+        return 1;
+    }
+    for (k = 0; k < arg->state_count; k++) {
+        int64_t s = arg->states[k];
+        if (arg->type == HFB_TYPE_U64 ? (s >= 0 && hfb_get_u64(p) == (uint64_t)s)
+            : arg->type == HFB_TYPE_I64 ? hfb_get_i64(p) == s
+            : hfb_value_get(arg->type, p) == (double)s) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+const hfb_param_info_t *hfb_param_info(uint16_t id)
+{
+    size_t i;
+    for (i = 0; i < HFB_PARAM_ENTRIES; i++) {
+        if (hfb_params[i].id == id) {
+            return &hfb_params[i];
+        }
+    }
+    return NULL;
+}
+
 /* ---- stream deframer --------------------------------------------------------------- */
 void hfb_deframer_init(hfb_deframer_t *deframer, hfb_frame_handler_t on_frame, void *context)
 {
     memset(deframer, 0, sizeof *deframer);
     deframer->on_frame = on_frame;
     deframer->context = context;
+}
+
+void hfb_deframer_on_other_version(hfb_deframer_t *deframer, hfb_frame_handler_t on_other)
+{
+    deframer->on_other_version = on_other;
+    deframer->other_total = 0;
+    deframer->other_held = 0;
+}
+
+/* A frame of another version whose whole span is at f: hand it over if its CRC is
+   good.  Its length field is trusted only as far as the CRC then confirms it. */
+static void hfb_other_complete(hfb_deframer_t *d, const uint8_t *f, size_t total)
+{
+    if (hfb_crc32(f, total - HFB_CRC_SIZE) == hfb_get_u32le(f + total - HFB_CRC_SIZE)) {
+        d->on_other_version(d->context, f, total);
+    }
+}
+
+/* The header check met a candidate of another version with its header complete;
+   `avail` bytes of it are in the buffer.  Not final: what is missing may still come. */
+static void hfb_other_candidate(hfb_deframer_t *d, const uint8_t *f, size_t avail, int final)
+{
+    size_t total = (size_t)hfb_get_u16(f + HFB_HDR_LENGTH_OFFSET) + HFB_FRAME_OVERHEAD;
+    if (total > HFB_MAX_FRAME) {
+        return;                   /* longer than any frame this kit can hold */
+    }
+    if (avail >= total) {
+        hfb_other_complete(d, f, total);
+    } else if (!final && d->other_total == 0u) {
+        /* the buffer forgets the candidate (it is a version error), so keep a copy */
+        memcpy(d->other, f, avail);
+        d->other_held = avail;
+        d->other_total = total;
+    }
+}
+
+/* bytes just appended to the buffer also continue the other-version frame being
+   collected, which ended where the buffer ended */
+static void hfb_other_more(hfb_deframer_t *d, const uint8_t *data, size_t n)
+{
+    size_t need = d->other_total - d->other_held;
+    size_t take = n < need ? n : need;
+    memcpy(d->other + d->other_held, data, take);
+    d->other_held += take;
+    if (d->other_held == d->other_total) {
+        d->other_total = 0;
+        hfb_other_complete(d, d->other, d->other_held);
+        d->other_held = 0;
+    }
 }
 
 /*
@@ -439,6 +713,9 @@ static size_t hfb_scan(hfb_deframer_t *d, int final, int closing, uint32_t *carr
         }
         if (b[i + HFB_HDR_VERSION_OFFSET] != HFB_PROTOCOL_VERSION_MAJOR) {
             d->counters.version_errors++;
+            if (d->on_other_version != NULL) {
+                hfb_other_candidate(d, b + i, n - i, final);
+            }
             continue;
         }
         if (!hfb_payload_limits(b[i + HFB_HDR_PACKET_ID_OFFSET], &lo, &hi)) {
@@ -514,6 +791,9 @@ void hfb_deframer_feed(hfb_deframer_t *deframer, const uint8_t *data, size_t n)
         if (take > 0u) {
             memcpy(deframer->buffer + deframer->held, data, take);
             deframer->held += take;
+            if (deframer->other_total > 0u) {
+                hfb_other_more(deframer, data, take);
+            }
             data += take;
             n -= take;
         }
@@ -526,5 +806,7 @@ void hfb_deframer_flush(hfb_deframer_t *deframer)
     uint32_t carried = 0;
     (void)hfb_scan(deframer, 1, 1, &carried);
     deframer->held = 0;
+    deframer->other_total = 0;    /* the end of the stream: it will never be complete */
+    deframer->other_held = 0;
 }
 """

@@ -130,6 +130,30 @@ def c_number(value: float, wire_type: str) -> str:
     return f"({n}{suffix})" if n < 0 else f"{n}{suffix}"
 
 
+def c_bound(value: float, wire_type: str) -> str:
+    """A range bound as the double literal of the tables: an f32 item's bound already
+    rounded to float (decimal -> double -> float, as SPEC 3.2 and numpy round it), so a
+    comparison in double gives the float comparison's answer; others as written."""
+    value = float(value)
+    if wire_type == "f32":
+        rounded = float(np.float32(value))
+        if math.isfinite(value) and not math.isfinite(rounded):
+            raise KitError(f"the bound {value!r} does not fit an f32")
+        value = rounded
+    return c_double(value)
+
+
+def type_enum(wire_type: str) -> str:
+    """The hfb_type_t constant of a wire type."""
+    return f"HFB_TYPE_{wire_type.upper()}"
+
+
+def max_dims(d: Dictionary) -> int:
+    """HFB_PARAM_MAX_DIMS: the most dimensions of a parameter's shape (at least 1, so the
+    shape array of the entry struct is never empty)."""
+    return max([1] + [len(p.shape) for p in d.parameters])
+
+
 def hex_u(value: int, digits: int) -> str:
     return f"0x{value:0{digits}X}u"
 

@@ -83,27 +83,78 @@ int hfb_payload_limits(uint8_t packet_id, uint16_t *min_length, uint16_t *max_le
     }
 }
 
+/* every command's arguments in wire order: what check 4 of SPEC.md 6.3 loops over */
+static const hfb_arg_info_t hfb_args_connect[5] = {
+    {"protocol_major", HFB_TYPE_U8, 0u, 0u, 0.0, 0.0, 0u, NULL, ""},
+    {"protocol_minor", HFB_TYPE_U8, 1u, 0u, 0.0, 0.0, 0u, NULL, ""},
+    {"dictionary_hash", HFB_TYPE_U32, 2u, 0u, 0.0, 0.0, 0u, NULL, ""},
+    {"telemetry_port", HFB_TYPE_U16, 6u, 1u, 0.0, 65535.0, 0u, NULL, ""},
+    {"take_over", HFB_TYPE_U8, 8u, 1u, 0.0, 1.0, 0u, NULL, ""},
+};
+static const int64_t hfb_states_set_mode_mode[4] = {0ll, 1ll, 2ll, 3ll};
+static const hfb_arg_info_t hfb_args_set_mode[1] = {
+    {"mode", HFB_TYPE_U8, 0u, 0u, 0.0, 0.0, 4u, hfb_states_set_mode_mode, ""},
+};
+static const hfb_arg_info_t hfb_args_friction_comp[1] = {
+    {"enable", HFB_TYPE_U8, 0u, 1u, 0.0, 1.0, 0u, NULL, ""},
+};
+static const hfb_arg_info_t hfb_args_set_currents[2] = {
+    {"current_coarse", HFB_TYPE_F32, 0u, 1u, (-2.5299999713897705), 2.5299999713897705, 0u, NULL, "A"},
+    {"current_fine", HFB_TYPE_F32, 4u, 1u, (-1.0), 1.0, 0u, NULL, "A"},
+};
+static const hfb_arg_info_t hfb_args_set_reference[1] = {
+    {"reference", HFB_TYPE_F32, 0u, 1u, (-0.3490000069141388), 0.3490000069141388, 0u, NULL, "rad"},
+};
+static const hfb_arg_info_t hfb_args_param_begin[2] = {
+    {"table_version", HFB_TYPE_U16, 0u, 0u, 0.0, 0.0, 0u, NULL, ""},
+    {"table_length", HFB_TYPE_U32, 2u, 1u, 1.0, 65536.0, 0u, NULL, "bytes"},
+};
+static const hfb_arg_info_t hfb_args_param_write[2] = {
+    {"offset", HFB_TYPE_U32, 0u, 0u, 0.0, 0.0, 0u, NULL, "bytes"},
+    {"data", HFB_TYPE_BYTES, 4u, 0u, 0.0, 0.0, 0u, NULL, ""},
+};
+static const hfb_arg_info_t hfb_args_param_commit[1] = {
+    {"table_crc", HFB_TYPE_U32, 0u, 0u, 0.0, 0.0, 0u, NULL, ""},
+};
+static const hfb_arg_info_t hfb_args_param_read[2] = {
+    {"offset", HFB_TYPE_U32, 0u, 0u, 0.0, 0.0, 0u, NULL, "bytes"},
+    {"count", HFB_TYPE_U16, 4u, 1u, 1.0, 1000.0, 0u, NULL, "bytes"},
+};
+static const int64_t hfb_states_profile_begin_target[4] = {0ll, 1ll, 2ll, 3ll};
+static const hfb_arg_info_t hfb_args_profile_begin[3] = {
+    {"profile_id", HFB_TYPE_U16, 0u, 1u, 1.0, 65535.0, 0u, NULL, ""},
+    {"target", HFB_TYPE_U8, 2u, 0u, 0.0, 0.0, 4u, hfb_states_profile_begin_target, ""},
+    {"sample_count", HFB_TYPE_U32, 3u, 1u, 1.0, 2400000.0, 0u, NULL, "samples"},
+};
+static const hfb_arg_info_t hfb_args_profile_write[2] = {
+    {"offset", HFB_TYPE_U32, 0u, 0u, 0.0, 0.0, 0u, NULL, "samples"},
+    {"samples", HFB_TYPE_BYTES, 4u, 0u, 0.0, 0.0, 0u, NULL, ""},
+};
+static const hfb_arg_info_t hfb_args_profile_commit[1] = {
+    {"profile_crc", HFB_TYPE_U32, 0u, 0u, 0.0, 0.0, 0u, NULL, ""},
+};
+
 static const hfb_command_info_t hfb_commands[] = {
-    {"CONNECT", HFB_CMD_CONNECT_OPCODE, 9u, 0u, 14u, 0u, 0u, 0u},
-    {"DISCONNECT", HFB_CMD_DISCONNECT_OPCODE, 0u, 0u, 0u, 0u, 1u, 0u},
-    {"HEARTBEAT", HFB_CMD_HEARTBEAT_OPCODE, 0u, 0u, 4u, 0u, 1u, 0u},
-    {"GET_INFO", HFB_CMD_GET_INFO_OPCODE, 0u, 0u, 14u, 1u, 0u, 0u},
-    {"SET_MODE", HFB_CMD_SET_MODE_OPCODE, 1u, 0u, 0u, 0u, 1u, 1u},
-    {"ARM", HFB_CMD_ARM_OPCODE, 0u, 0u, 0u, 0u, 1u, 1u},
-    {"DISARM", HFB_CMD_DISARM_OPCODE, 0u, 0u, 0u, 0u, 1u, 0u},
-    {"ABORT", HFB_CMD_ABORT_OPCODE, 0u, 0u, 0u, 0u, 0u, 0u},
-    {"FRICTION_COMP", HFB_CMD_FRICTION_COMP_OPCODE, 1u, 0u, 0u, 0u, 1u, 0u},
-    {"SET_CURRENTS", HFB_CMD_SET_CURRENTS_OPCODE, 8u, 0u, 0u, 0u, 1u, 1u},
-    {"SET_REFERENCE", HFB_CMD_SET_REFERENCE_OPCODE, 4u, 0u, 0u, 0u, 1u, 0u},
-    {"PARAM_BEGIN", HFB_CMD_PARAM_BEGIN_OPCODE, 6u, 0u, 0u, 0u, 1u, 1u},
-    {"PARAM_WRITE", HFB_CMD_PARAM_WRITE_OPCODE, 4u, 1u, 0u, 0u, 1u, 0u},
-    {"PARAM_COMMIT", HFB_CMD_PARAM_COMMIT_OPCODE, 4u, 0u, 8u, 0u, 1u, 1u},
-    {"PARAM_READ", HFB_CMD_PARAM_READ_OPCODE, 6u, 0u, 4u, 1u, 1u, 0u},
-    {"PROFILE_BEGIN", HFB_CMD_PROFILE_BEGIN_OPCODE, 7u, 0u, 0u, 0u, 1u, 0u},
-    {"PROFILE_WRITE", HFB_CMD_PROFILE_WRITE_OPCODE, 4u, 1u, 0u, 0u, 1u, 0u},
-    {"PROFILE_COMMIT", HFB_CMD_PROFILE_COMMIT_OPCODE, 4u, 0u, 0u, 0u, 1u, 0u},
-    {"PROFILE_START", HFB_CMD_PROFILE_START_OPCODE, 0u, 0u, 0u, 0u, 1u, 1u},
-    {"PROFILE_STOP", HFB_CMD_PROFILE_STOP_OPCODE, 0u, 0u, 0u, 0u, 1u, 0u},
+    {"CONNECT", HFB_CMD_CONNECT_OPCODE, 9u, 0u, 14u, 0u, 0u, 0u, 5u, hfb_args_connect},
+    {"DISCONNECT", HFB_CMD_DISCONNECT_OPCODE, 0u, 0u, 0u, 0u, 1u, 0u, 0u, NULL},
+    {"HEARTBEAT", HFB_CMD_HEARTBEAT_OPCODE, 0u, 0u, 4u, 0u, 1u, 0u, 0u, NULL},
+    {"GET_INFO", HFB_CMD_GET_INFO_OPCODE, 0u, 0u, 14u, 1u, 0u, 0u, 0u, NULL},
+    {"SET_MODE", HFB_CMD_SET_MODE_OPCODE, 1u, 0u, 0u, 0u, 1u, 1u, 1u, hfb_args_set_mode},
+    {"ARM", HFB_CMD_ARM_OPCODE, 0u, 0u, 0u, 0u, 1u, 1u, 0u, NULL},
+    {"DISARM", HFB_CMD_DISARM_OPCODE, 0u, 0u, 0u, 0u, 1u, 0u, 0u, NULL},
+    {"ABORT", HFB_CMD_ABORT_OPCODE, 0u, 0u, 0u, 0u, 0u, 0u, 0u, NULL},
+    {"FRICTION_COMP", HFB_CMD_FRICTION_COMP_OPCODE, 1u, 0u, 0u, 0u, 1u, 0u, 1u, hfb_args_friction_comp},
+    {"SET_CURRENTS", HFB_CMD_SET_CURRENTS_OPCODE, 8u, 0u, 0u, 0u, 1u, 1u, 2u, hfb_args_set_currents},
+    {"SET_REFERENCE", HFB_CMD_SET_REFERENCE_OPCODE, 4u, 0u, 0u, 0u, 1u, 0u, 1u, hfb_args_set_reference},
+    {"PARAM_BEGIN", HFB_CMD_PARAM_BEGIN_OPCODE, 6u, 0u, 0u, 0u, 1u, 1u, 2u, hfb_args_param_begin},
+    {"PARAM_WRITE", HFB_CMD_PARAM_WRITE_OPCODE, 4u, 1u, 0u, 0u, 1u, 0u, 2u, hfb_args_param_write},
+    {"PARAM_COMMIT", HFB_CMD_PARAM_COMMIT_OPCODE, 4u, 0u, 8u, 0u, 1u, 1u, 1u, hfb_args_param_commit},
+    {"PARAM_READ", HFB_CMD_PARAM_READ_OPCODE, 6u, 0u, 4u, 1u, 1u, 0u, 2u, hfb_args_param_read},
+    {"PROFILE_BEGIN", HFB_CMD_PROFILE_BEGIN_OPCODE, 7u, 0u, 0u, 0u, 1u, 0u, 3u, hfb_args_profile_begin},
+    {"PROFILE_WRITE", HFB_CMD_PROFILE_WRITE_OPCODE, 4u, 1u, 0u, 0u, 1u, 0u, 2u, hfb_args_profile_write},
+    {"PROFILE_COMMIT", HFB_CMD_PROFILE_COMMIT_OPCODE, 4u, 0u, 0u, 0u, 1u, 0u, 1u, hfb_args_profile_commit},
+    {"PROFILE_START", HFB_CMD_PROFILE_START_OPCODE, 0u, 0u, 0u, 0u, 1u, 1u, 0u, NULL},
+    {"PROFILE_STOP", HFB_CMD_PROFILE_STOP_OPCODE, 0u, 0u, 0u, 0u, 1u, 0u, 0u, NULL},
 };
 
 const hfb_command_info_t *hfb_command_info(uint16_t opcode)
@@ -116,6 +167,32 @@ const hfb_command_info_t *hfb_command_info(uint16_t opcode)
     }
     return NULL;
 }
+
+/* the parameter table's entries in id (= table) order: what validation and
+ * activation loop over */
+const hfb_param_info_t hfb_params[HFB_PARAM_ENTRIES] = {
+    {1u, "watchdog_timeout", HFB_TYPE_F32, 4u, 0u, 1u, 0u, {0u, 0u}, 0.05000000074505806, 10.0, 0u, hfb_param_default_table + 0, "s"},
+    {2u, "saturation_coarse", HFB_TYPE_F32, 4u, 4u, 1u, 0u, {0u, 0u}, 0.0, 81.30000305175781, 0u, hfb_param_default_table + 4, "in-oz"},
+    {3u, "saturation_fine", HFB_TYPE_F32, 4u, 8u, 1u, 0u, {0u, 0u}, 0.0, 16.100000381469727, 0u, hfb_param_default_table + 8, "in-oz"},
+    {4u, "outer_loop_gain", HFB_TYPE_F32, 4u, 12u, 1u, 0u, {0u, 0u}, 0.0, 200.0, 0u, hfb_param_default_table + 12, "1/s"},
+    {5u, "complementary_crossover", HFB_TYPE_F32, 4u, 16u, 1u, 0u, {0u, 0u}, 0.009999999776482582, 50.0, 0u, hfb_param_default_table + 16, "Hz"},
+    {6u, "friction_comp_enabled", HFB_TYPE_U8, 1u, 20u, 1u, 0u, {0u, 0u}, 0.0, 1.0, 0u, hfb_param_default_table + 20, ""},
+    {7u, "travel_limit", HFB_TYPE_F32, 4u, 21u, 1u, 0u, {0u, 0u}, 0.0, 0.3490000069141388, 0u, hfb_param_default_table + 21, "rad"},
+    {8u, "anti_windup", HFB_TYPE_U8, 1u, 25u, 1u, 0u, {0u, 0u}, 0.0, 1.0, 0u, hfb_param_default_table + 25, ""},
+    {10u, "relative_c0", HFB_TYPE_F64, 8u, 26u, 72u, 2u, {12u, 6u}, (-1000000000000.0), 1000000000000.0, 1u, hfb_param_default_table + 26, "in-oz/rad"},
+    {11u, "relative_c1", HFB_TYPE_F64, 8u, 602u, 72u, 2u, {12u, 6u}, (-1000000000000.0), 1000000000000.0, 1u, hfb_param_default_table + 602, ""},
+    {12u, "relative_c2", HFB_TYPE_F64, 8u, 1178u, 72u, 2u, {12u, 6u}, (-1000000000000.0), 1000000000000.0, 1u, hfb_param_default_table + 1178, ""},
+    {13u, "inertial_c0", HFB_TYPE_F64, 8u, 1754u, 72u, 2u, {12u, 6u}, (-1000000000000.0), 1000000000000.0, 1u, hfb_param_default_table + 1754, "in-oz/(rad/s)"},
+    {14u, "inertial_c1", HFB_TYPE_F64, 8u, 2330u, 72u, 2u, {12u, 6u}, (-1000000000000.0), 1000000000000.0, 1u, hfb_param_default_table + 2330, ""},
+    {15u, "inertial_c2", HFB_TYPE_F64, 8u, 2906u, 72u, 2u, {12u, 6u}, (-1000000000000.0), 1000000000000.0, 1u, hfb_param_default_table + 2906, ""},
+    {20u, "friction_comp_model", HFB_TYPE_U8, 1u, 3482u, 1u, 0u, {0u, 0u}, 0.0, 3.0, 0u, hfb_param_default_table + 3482, ""},
+    {21u, "friction_comp_sigma", HFB_TYPE_F32, 4u, 3483u, 1u, 0u, {0u, 0u}, 1.0, 1000000.0, 0u, hfb_param_default_table + 3483, "in-oz/rad"},
+    {22u, "friction_comp_coulomb", HFB_TYPE_F32, 4u, 3487u, 1u, 0u, {0u, 0u}, 0.009999999776482582, 81.30000305175781, 0u, hfb_param_default_table + 3487, "in-oz"},
+    {23u, "friction_comp_alpha", HFB_TYPE_F32, 4u, 3491u, 1u, 0u, {0u, 0u}, 0.05000000074505806, 10.0, 0u, hfb_param_default_table + 3491, ""},
+    {24u, "friction_comp_table_points", HFB_TYPE_U8, 1u, 3495u, 1u, 0u, {0u, 0u}, 2.0, 64.0, 0u, hfb_param_default_table + 3495, ""},
+    {25u, "friction_comp_table_x", HFB_TYPE_F32, 4u, 3496u, 64u, 1u, {64u, 0u}, 0.0, 2.0, 0u, hfb_param_default_table + 3496, ""},
+    {26u, "friction_comp_table_slope", HFB_TYPE_F32, 4u, 3752u, 64u, 1u, {64u, 0u}, 0.0, 1000.0, 0u, hfb_param_default_table + 3752, ""},
+};
 
 /* ---- CRC -------------------------------------------------------------------------- */
 uint32_t hfb_crc32_update(uint32_t state, const uint8_t *data, size_t n)
@@ -175,12 +252,204 @@ int hfb_frame_view(const uint8_t *frame, size_t length, hfb_frame_view_t *view)
     return (size_t)view->length + HFB_FRAME_OVERHEAD == length ? 0 : -1;
 }
 
+/* ---- values described by the dictionary -------------------------------------------- */
+double hfb_value_get(hfb_type_t type, const uint8_t *p)
+{
+    switch (type) {
+    case HFB_TYPE_U8: return (double)hfb_get_u8(p);
+    case HFB_TYPE_I8: return (double)hfb_get_i8(p);
+    case HFB_TYPE_U16: return (double)hfb_get_u16(p);
+    case HFB_TYPE_I16: return (double)hfb_get_i16(p);
+    case HFB_TYPE_U32: return (double)hfb_get_u32(p);
+    case HFB_TYPE_I32: return (double)hfb_get_i32(p);
+    case HFB_TYPE_U64: return (double)hfb_get_u64(p);
+    case HFB_TYPE_I64: return (double)hfb_get_i64(p);
+    case HFB_TYPE_F32: return (double)hfb_get_f32(p);
+    case HFB_TYPE_F64: return hfb_get_f64(p);
+    case HFB_TYPE_STR:
+    case HFB_TYPE_BYTES:
+    default:
+        return 0.0;
+    }
+}
+
+/* v >= b and v <= b for 64-bit integers, exactly: converting v to double would round
+   above 2^53.  t is b truncated toward zero, exact once b is known to be in range. */
+static int hfb_i64_at_least(int64_t v, double b)
+{
+    int64_t t;
+    if (b <= -9223372036854775808.0) {
+        return 1;
+    }
+    if (b >= 9223372036854775808.0) {
+        return 0;
+    }
+    t = (int64_t)b;
+    return v > t || (v == t && (double)t >= b);
+}
+
+static int hfb_i64_at_most(int64_t v, double b)
+{
+    int64_t t;
+    if (b >= 9223372036854775808.0) {
+        return 1;
+    }
+    if (b < -9223372036854775808.0) {
+        return 0;
+    }
+    t = (int64_t)b;
+    return v < t || (v == t && (double)t <= b);
+}
+
+static int hfb_u64_at_least(uint64_t v, double b)
+{
+    uint64_t t;
+    if (b <= 0.0) {
+        return 1;
+    }
+    if (b >= 18446744073709551616.0) {
+        return 0;
+    }
+    t = (uint64_t)b;
+    return v > t || (v == t && (double)t >= b);
+}
+
+static int hfb_u64_at_most(uint64_t v, double b)
+{
+    uint64_t t;
+    if (b >= 18446744073709551616.0) {
+        return 1;
+    }
+    if (b < 0.0) {
+        return 0;
+    }
+    t = (uint64_t)b;
+    return v < t || (v == t && (double)t <= b);
+}
+
+int hfb_value_in_range(hfb_type_t type, const uint8_t *p, double min, double max)
+{
+    double v;
+    switch (type) {
+    case HFB_TYPE_U64:
+        return hfb_u64_at_least(hfb_get_u64(p), min) && hfb_u64_at_most(hfb_get_u64(p), max);
+    case HFB_TYPE_I64:
+        return hfb_i64_at_least(hfb_get_i64(p), min) && hfb_i64_at_most(hfb_get_i64(p), max);
+    case HFB_TYPE_F32:
+        /* NaN and infinities by their bits: no math.h, and immune to fast-math flags */
+        if ((hfb_get_u32(p) & 0x7F800000u) == 0x7F800000u) {
+            return 0;
+        }
+        break;
+    case HFB_TYPE_F64:
+        if ((hfb_get_u64(p) & 0x7FF0000000000000ull) == 0x7FF0000000000000ull) {
+            return 0;
+        }
+        break;
+    case HFB_TYPE_STR:
+    case HFB_TYPE_BYTES:
+        return 1;                 /* no range applies to text or raw bytes */
+    default:
+        break;                    /* integers of up to 32 bits are exact in a double */
+    }
+    v = hfb_value_get(type, p);
+    return v >= min && v <= max;
+}
+
+int hfb_arg_valid(const hfb_arg_info_t *arg, const uint8_t *arguments)
+{
+    const uint8_t *p = arguments + arg->offset;
+    uint8_t k;
+    if (arg->type == HFB_TYPE_STR || arg->type == HFB_TYPE_BYTES) {
+        return 1;
+    }
+    if (arg->has_range) {
+        if (!hfb_value_in_range(arg->type, p, arg->min, arg->max)) {
+            return 0;
+        }
+    } else if (!hfb_value_in_range(arg->type, p, -DBL_MAX, DBL_MAX)) {
+        return 0;                 /* a float without a range must still be finite */
+    }
+    if (arg->state_count == 0u) {
+        return 1;
+    }
+    for (k = 0; k < arg->state_count; k++) {
+        int64_t s = arg->states[k];
+        if (arg->type == HFB_TYPE_U64 ? (s >= 0 && hfb_get_u64(p) == (uint64_t)s)
+            : arg->type == HFB_TYPE_I64 ? hfb_get_i64(p) == s
+            : hfb_value_get(arg->type, p) == (double)s) {
+            return 1;
+        }
+    }
+    return 0;
+}
+
+const hfb_param_info_t *hfb_param_info(uint16_t id)
+{
+    size_t i;
+    for (i = 0; i < HFB_PARAM_ENTRIES; i++) {
+        if (hfb_params[i].id == id) {
+            return &hfb_params[i];
+        }
+    }
+    return NULL;
+}
+
 /* ---- stream deframer --------------------------------------------------------------- */
 void hfb_deframer_init(hfb_deframer_t *deframer, hfb_frame_handler_t on_frame, void *context)
 {
     memset(deframer, 0, sizeof *deframer);
     deframer->on_frame = on_frame;
     deframer->context = context;
+}
+
+void hfb_deframer_on_other_version(hfb_deframer_t *deframer, hfb_frame_handler_t on_other)
+{
+    deframer->on_other_version = on_other;
+    deframer->other_total = 0;
+    deframer->other_held = 0;
+}
+
+/* A frame of another version whose whole span is at f: hand it over if its CRC is
+   good.  Its length field is trusted only as far as the CRC then confirms it. */
+static void hfb_other_complete(hfb_deframer_t *d, const uint8_t *f, size_t total)
+{
+    if (hfb_crc32(f, total - HFB_CRC_SIZE) == hfb_get_u32le(f + total - HFB_CRC_SIZE)) {
+        d->on_other_version(d->context, f, total);
+    }
+}
+
+/* The header check met a candidate of another version with its header complete;
+   `avail` bytes of it are in the buffer.  Not final: what is missing may still come. */
+static void hfb_other_candidate(hfb_deframer_t *d, const uint8_t *f, size_t avail, int final)
+{
+    size_t total = (size_t)hfb_get_u16(f + HFB_HDR_LENGTH_OFFSET) + HFB_FRAME_OVERHEAD;
+    if (total > HFB_MAX_FRAME) {
+        return;                   /* longer than any frame this kit can hold */
+    }
+    if (avail >= total) {
+        hfb_other_complete(d, f, total);
+    } else if (!final && d->other_total == 0u) {
+        /* the buffer forgets the candidate (it is a version error), so keep a copy */
+        memcpy(d->other, f, avail);
+        d->other_held = avail;
+        d->other_total = total;
+    }
+}
+
+/* bytes just appended to the buffer also continue the other-version frame being
+   collected, which ended where the buffer ended */
+static void hfb_other_more(hfb_deframer_t *d, const uint8_t *data, size_t n)
+{
+    size_t need = d->other_total - d->other_held;
+    size_t take = n < need ? n : need;
+    memcpy(d->other + d->other_held, data, take);
+    d->other_held += take;
+    if (d->other_held == d->other_total) {
+        d->other_total = 0;
+        hfb_other_complete(d, d->other, d->other_held);
+        d->other_held = 0;
+    }
 }
 
 /*
@@ -228,6 +497,9 @@ static size_t hfb_scan(hfb_deframer_t *d, int final, int closing, uint32_t *carr
         }
         if (b[i + HFB_HDR_VERSION_OFFSET] != HFB_PROTOCOL_VERSION_MAJOR) {
             d->counters.version_errors++;
+            if (d->on_other_version != NULL) {
+                hfb_other_candidate(d, b + i, n - i, final);
+            }
             continue;
         }
         if (!hfb_payload_limits(b[i + HFB_HDR_PACKET_ID_OFFSET], &lo, &hi)) {
@@ -303,6 +575,9 @@ void hfb_deframer_feed(hfb_deframer_t *deframer, const uint8_t *data, size_t n)
         if (take > 0u) {
             memcpy(deframer->buffer + deframer->held, data, take);
             deframer->held += take;
+            if (deframer->other_total > 0u) {
+                hfb_other_more(deframer, data, take);
+            }
             data += take;
             n -= take;
         }
@@ -315,6 +590,8 @@ void hfb_deframer_flush(hfb_deframer_t *deframer)
     uint32_t carried = 0;
     (void)hfb_scan(deframer, 1, 1, &carried);
     deframer->held = 0;
+    deframer->other_total = 0;    /* the end of the stream: it will never be complete */
+    deframer->other_held = 0;
 }
 
 /* ---- pack/unpack: native struct <-> big-endian bytes, offsets from the header ---- */

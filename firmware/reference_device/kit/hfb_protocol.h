@@ -1055,6 +1055,8 @@ int hfb_cmd_profile_commit_args_unpack(hfb_cmd_profile_commit_args_t *value, con
 #define HFB_PARAM_FRICTION_COMP_TABLE_SLOPE_MIN ((float)0.0)
 #define HFB_PARAM_FRICTION_COMP_TABLE_SLOPE_MAX ((float)1000.0)
 #define HFB_PARAM_TABLE_SIZE 4008u                           /* PARAM_BEGIN's table_length */
+#define HFB_PARAM_ENTRIES 21u                                /* entries of hfb_params[] */
+#define HFB_PARAM_MAX_DIMS 2u                                /* length of hfb_param_info_t.shape */
 #define HFB_PARAM_DEFAULT_TABLE_CRC 0x358F611Eu              /* CRC-32 of the table of defaults */
 /* the table of all defaults: the active table at boot, version 0 (SPEC.md 11.1) */
 extern const uint8_t hfb_param_default_table[HFB_PARAM_TABLE_SIZE];
@@ -1093,10 +1095,46 @@ typedef struct {
 
 int hfb_frame_view(const uint8_t *frame, size_t length, hfb_frame_view_t *view);
 
+/* ---- values described by the dictionary ---------------------------------------------
+ * The tables below (command arguments, parameter entries) name each value's wire type,
+ * so firmware can loop over them instead of listing every entry by hand: a new entry in
+ * the TOML then needs a new export, not a new line of firmware.
+ *
+ * hfb_value_get(type, p): the value at p read in its wire type, as a double (exact but
+ * for 64-bit integers beyond 2^53; 0 for str/bytes).
+ * hfb_value_in_range(type, p, min, max): 1 if the value at p is finite and within
+ * [min, max] compared in its own type (SPEC.md 3.2): integers exactly, f64 in double,
+ * f32 in float - the bounds of f32 values in the tables are already rounded to float,
+ * so the double comparison made here gives the float comparison's answer. */
+typedef enum {
+    HFB_TYPE_U8, HFB_TYPE_I8, HFB_TYPE_U16, HFB_TYPE_I16, HFB_TYPE_U32, HFB_TYPE_I32,
+    HFB_TYPE_U64, HFB_TYPE_I64, HFB_TYPE_F32, HFB_TYPE_F64, HFB_TYPE_STR, HFB_TYPE_BYTES
+} hfb_type_t;
+
+double hfb_value_get(hfb_type_t type, const uint8_t *p);
+int hfb_value_in_range(hfb_type_t type, const uint8_t *p, double min, double max);
+
 /* ---- commands ------------------------------------------------------------------------
- * hfb_command_info(opcode): what commands.toml says about a command, for the generic
- * checks of SPEC.md 6.3 (1: known opcode, 2: argument length, 3: session token); NULL
- * for an opcode that is not in the dictionary (REJECTED UNKNOWN_COMMAND). */
+ * hfb_command_info(opcode): what commands.toml says about a command, for the checks of
+ * SPEC.md 6.3 (1: known opcode, 2: argument length, 3: session token, 4: each argument
+ * in args[] with hfb_arg_valid); NULL for an opcode that is not in the dictionary
+ * (REJECTED UNKNOWN_COMMAND).
+ *
+ * hfb_arg_valid(arg, arguments): check 4 for one argument of a command's argument
+ * bytes (their length already checked): finite if a float, within its range if it has
+ * one, one of its states if it has states.  Command-specific bounds (an offset within
+ * the staged size, PARAM_BEGIN's table length) stay the firmware's. */
+typedef struct {
+    const char *name;
+    hfb_type_t type;
+    uint16_t offset;           /* in the argument bytes; str/bytes: where the rest begins */
+    uint8_t has_range;         /* 1: min and max apply */
+    double min, max;           /* the range; f32 ones rounded to float (SPEC.md 3.2) */
+    uint8_t state_count;       /* 0: no states; else the value must be one of states[] */
+    const int64_t *states;
+    const char *units;
+} hfb_arg_info_t;
+
 typedef struct {
     const char *name;
     uint16_t opcode;
@@ -1106,9 +1144,37 @@ typedef struct {
     uint8_t reply_variable;
     uint8_t needs_session;     /* 1: the session token must match */
     uint8_t critical;          /* 1: the host asks its operator first (informative) */
+    uint8_t arg_count;         /* entries of args[], in wire order (the variable one last) */
+    const hfb_arg_info_t *args;
 } hfb_command_info_t;
 
 const hfb_command_info_t *hfb_command_info(uint16_t opcode);
+int hfb_arg_valid(const hfb_arg_info_t *arg, const uint8_t *arguments);
+
+/* ---- the parameter table's entries ---------------------------------------------------
+ * hfb_params[]: every entry of parameters.toml in increasing id order, i.e. in table
+ * order (SPEC.md 11.1).  Element k of entry e is at table + e->offset +
+ * k * e->element_size, row-major; validation rules 1 and 2 of SPEC.md 11.1 for it are
+ * hfb_value_in_range(e->type, that pointer, e->min, e->max).  e->defaults points at the
+ * entry's bytes in hfb_param_default_table.  hfb_param_info(id): the entry with that
+ * id, or NULL. */
+typedef struct {
+    uint16_t id;
+    const char *name;
+    hfb_type_t type;
+    uint8_t element_size;      /* bytes of one element */
+    uint32_t offset;           /* byte offset of element 0 in the table */
+    uint32_t count;            /* elements: the product of the shape, 1 for a scalar */
+    uint8_t dims;              /* 0 scalar, 1 [n], 2 [rows, cols], ... */
+    uint32_t shape[HFB_PARAM_MAX_DIMS];   /* the first `dims` are used */
+    double min, max;           /* the range of every element; f32 ones rounded to float */
+    uint8_t sos;               /* 1: filter = "sos", rows b0 b1 b2 a0 a1 a2 (rule 3) */
+    const uint8_t *defaults;   /* big-endian, in hfb_param_default_table */
+    const char *units;
+} hfb_param_info_t;
+
+extern const hfb_param_info_t hfb_params[HFB_PARAM_ENTRIES];
+const hfb_param_info_t *hfb_param_info(uint16_t id);
 
 /* ---- stream deframer (SPEC.md 4.1) -------------------------------------------------
  * Finds frames in a byte stream (the TCP command connection, a serial line) with the
@@ -1124,7 +1190,20 @@ const hfb_command_info_t *hfb_command_info(uint16_t opcode);
  * the same deframer.  Any number of bytes may be fed at once: a feed larger than the
  * buffer is scanned in pieces with the same result.  HFB_DEFRAMER_CAPACITY (at least
  * one largest frame) may be set on the compiler's command line, the same for every
- * file.  Counters are 32 bits and wrap. */
+ * file.  Counters are 32 bits and wrap.
+ *
+ * Frames of another major version.  The header check drops a candidate whose version
+ * byte differs (counted in version_errors), yet SPEC.md 7 asks a device to answer a
+ * CONNECT in such a frame with REJECTED DICTIONARY_MISMATCH.  So, optionally:
+ *     hfb_deframer_on_other_version(&rx, on_other);  (after init; same context)
+ * on_other(context, frame, length) then also gets each such candidate whose whole span
+ * (its length field + HFB_FRAME_OVERHEAD, at most HFB_MAX_FRAME) arrived with a good
+ * CRC - the header and the CRC keep their layout in every major version (SPEC.md 7);
+ * the packet id and length rules are the other version's, so it checks them itself.
+ * Framing is unchanged by it: the candidate is still a version error, its bytes junk,
+ * and the scan goes on after its first byte, so the counters stay the host's.  A span
+ * that is not complete yet is copied aside (other[], one at a time) until it is; the
+ * frame handed over points into the buffer or into other[], valid during the call. */
 #ifndef HFB_DEFRAMER_CAPACITY
 #define HFB_DEFRAMER_CAPACITY (2u * HFB_MAX_FRAME)
 #endif
@@ -1151,9 +1230,14 @@ typedef struct {
     void *context;
     size_t held;                      /* bytes waiting in buffer[] */
     uint8_t buffer[HFB_DEFRAMER_CAPACITY];
+    hfb_frame_handler_t on_other_version;   /* NULL: frames of another version just dropped */
+    size_t other_held;                /* bytes of an incomplete other-version frame in other[] */
+    size_t other_total;               /* its whole length; 0: none being collected */
+    uint8_t other[HFB_MAX_FRAME];
 } hfb_deframer_t;
 
 void hfb_deframer_init(hfb_deframer_t *deframer, hfb_frame_handler_t on_frame, void *context);
+void hfb_deframer_on_other_version(hfb_deframer_t *deframer, hfb_frame_handler_t on_other);
 void hfb_deframer_feed(hfb_deframer_t *deframer, const uint8_t *data, size_t n);
 /* end of stream (connection closed): decode what can be, count the rest as junk */
 void hfb_deframer_flush(hfb_deframer_t *deframer);

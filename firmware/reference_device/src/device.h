@@ -61,8 +61,6 @@ typedef struct {
     hfb_deframer_t rx;
     size_t out_len;               /* bytes waiting in out[] (send buffer) */
     uint8_t out[65536];
-    size_t probe_len;             /* bytes in probe[] (version_probe.c) */
-    uint8_t probe[2u * HFB_MAX_FRAME];
 } connection_t;
 
 /* ---- one remembered command with the RESPONSE payloads sent for it (SPEC 6.4) ------ */
@@ -165,11 +163,9 @@ void telemetry_high_rate(const period_record_t *r);
 void telemetry_housekeeping(void);
 void event_send(uint8_t level, uint16_t code, const char *text);
 
-/* version_probe.c: CONNECT in a frame of another major version (SPEC 7) */
-void version_probe_feed(int c, const uint8_t *data, size_t n);
-
 /* session.c (SPEC 7, 9.1) */
 void session_connect(int c, uint32_t sequence, uint16_t opcode, const uint8_t *args, size_t n);
+void session_refuse_dictionary(int c, uint32_t sequence, uint16_t opcode);
 void session_end(const char *why);
 void session_connection_closed(int c);
 void session_owner_text(char *out, size_t cap);
@@ -177,6 +173,7 @@ uint32_t random_token(void);
 
 /* commands.c (SPEC 6) */
 void commands_on_frame(void *context, const uint8_t *frame, size_t length);
+void commands_on_other_version(void *context, const uint8_t *frame, size_t length);
 void respond(int c, uint32_t sequence, uint16_t opcode, uint8_t stage, uint16_t reason,
              const uint8_t *data, size_t n);
 
@@ -190,6 +187,8 @@ void control_reset_cascades(void);
 
 /* params.c (SPEC 11.1) */
 void params_boot(void);
+int params_self_test(char *why, size_t cap);
+int cascade_slot(uint16_t param_id);        /* dev.cascade[] of an sos entry, -1: none */
 int params_validate(const uint8_t *table, char *why, size_t cap);
 void params_activate(const uint8_t *table, uint16_t version);
 

@@ -99,10 +99,12 @@ static void accept_new(void)
         dev.conn[i].peer_ip = peer.sin_addr.s_addr;
         dev.conn[i].peer_port = ntohs(peer.sin_port);
         dev.conn[i].out_len = 0;
-        dev.conn[i].probe_len = 0;
         /* the deframer's context is the slot number, so replies go back where the
            command came from (SPEC 1.1) */
         hfb_deframer_init(&dev.conn[i].rx, commands_on_frame, (void *)&dev.conn[i]);
+        /* and frames of another major version too: a CONNECT among them gets its
+           DICTIONARY_MISMATCH (SPEC 7) */
+        hfb_deframer_on_other_version(&dev.conn[i].rx, commands_on_other_version);
     }
 }
 
@@ -146,9 +148,6 @@ void net_poll(void)
             ssize_t r = recv(k->fd, buf, sizeof buf, 0);
             if (r > 0) {
                 hfb_deframer_feed(&k->rx, buf, (size_t)r);   /* executes the commands found */
-                if (k->fd >= 0) {
-                    version_probe_feed(c, buf, (size_t)r);   /* what the deframer drops */
-                }
             } else if (r == 0 || (errno != EAGAIN && errno != EWOULDBLOCK && errno != EINTR)) {
                 net_drop_connection(c);
             } else {

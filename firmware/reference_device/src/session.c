@@ -57,6 +57,22 @@ void session_owner_text(char *out, size_t cap)
     }
 }
 
+/* REJECTED DICTIONARY_MISMATCH: the CONNECT reply layout with token 0 as data, so the
+   host can name both versions and both hashes (SPEC 7) */
+void session_refuse_dictionary(int c, uint32_t sequence, uint16_t opcode)
+{
+    hfb_cmd_connect_reply_t reply;
+    uint8_t data[HFB_CMD_CONNECT_REPLY_SIZE];
+    reply.session_token = 0u;
+    reply.protocol_major = HFB_PROTOCOL_VERSION_MAJOR;
+    reply.protocol_minor = HFB_PROTOCOL_VERSION_MINOR;
+    reply.dictionary_hash = HFB_DICTIONARY_HASH;
+    reply.tick = dev.tick;
+    (void)hfb_cmd_connect_reply_pack(&reply, data, sizeof data);
+    respond(c, sequence, opcode, HFB_PKT_RESPONSE_STAGE_REJECTED, HFB_ERR_DICTIONARY_MISMATCH,
+            data, sizeof data);
+}
+
 void session_connect(int c, uint32_t sequence, uint16_t opcode, const uint8_t *args, size_t n)
 {
     hfb_cmd_connect_args_t a;
@@ -65,17 +81,13 @@ void session_connect(int c, uint32_t sequence, uint16_t opcode, const uint8_t *a
     int was_open = dev.token != 0u;
 
     (void)hfb_cmd_connect_args_unpack(&a, args, n);
-    reply.session_token = 0u;
     reply.protocol_major = HFB_PROTOCOL_VERSION_MAJOR;
     reply.protocol_minor = HFB_PROTOCOL_VERSION_MINOR;
     reply.dictionary_hash = HFB_DICTIONARY_HASH;
-    reply.tick = dev.tick;
 
-    /* 1: the dictionary; the reply layout with token 0 lets the host name both hashes */
+    /* 1: the dictionary */
     if (a.protocol_major != HFB_PROTOCOL_VERSION_MAJOR || a.dictionary_hash != HFB_DICTIONARY_HASH) {
-        (void)hfb_cmd_connect_reply_pack(&reply, data, sizeof data);
-        respond(c, sequence, opcode, HFB_PKT_RESPONSE_STAGE_REJECTED, HFB_ERR_DICTIONARY_MISMATCH,
-                data, sizeof data);
+        session_refuse_dictionary(c, sequence, opcode);
         return;
     }
     /* 2: another connection owns the session.  The owner's own CONNECT is never busy. */
@@ -102,6 +114,7 @@ void session_connect(int c, uint32_t sequence, uint16_t opcode, const uint8_t *a
     }
 
     reply.session_token = dev.token;
+    reply.tick = dev.tick;
     (void)hfb_cmd_connect_reply_pack(&reply, data, sizeof data);
     respond(c, sequence, opcode, HFB_PKT_RESPONSE_STAGE_COMPLETED, HFB_ERR_OK, data, sizeof data);
     if (was_open) {
