@@ -52,7 +52,9 @@ def status_line(viewer) -> str:
     extra = "".join(f" | {label} {n} msg" for label, n in (
         ("missed", c.missed_messages), ("bad", c.bad_messages),
         ("resync", c.message_resyncs)) if n)
-    if viewer.link_state == LinkState.UP:
+    if viewer.link_state == LinkState.UP and viewer.hello.get("link_state") is None:
+        commander = "commander: no device link (its session ended)"
+    elif viewer.link_state == LinkState.UP:
         commander = (f"commander: {viewer.hello.get('link_state', '?')}, "
                      f"drop={viewer.hello.get('dropped', '?')}")
     else:

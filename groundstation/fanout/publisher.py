@@ -121,7 +121,9 @@ class Publisher:
         self._device = device_description(client, address)
 
         def on_link(state: str, message: str) -> None:
-            self._send_json(wire.TOPIC_LINK, {"state": state, "message": message})
+            # a link closed as asked has no error text: viewers print what they get
+            self._send_json(wire.TOPIC_LINK, {"state": state, "message": message or
+                                              f"the commanding station's device link is {state}"})
 
         client.add_raw_tap(self.publish_frames)
         client.add_command_listener(self.publish_command)
@@ -211,8 +213,13 @@ class Publisher:
 
     # ------------------------------------------------------------------ closing
     def close(self) -> None:
-        """Stop publishing (the device link goes on); safe to call twice."""
+        """Stop publishing (the device link goes on); safe to call twice.  Viewers are told
+        (best effort: a viewer that misses it says 'lost' after its silence time)."""
+        was_attached = self._detach is not None
         self.detach()
+        if was_attached and not self._stop.is_set():
+            self._send_json(wire.TOPIC_LINK, {"state": "closed", "message":
+                                              "the commanding station stopped publishing"})
         self._stop.set()
         if self._hello.is_alive() and self._hello is not threading.current_thread():
             self._hello.join(timeout=2.0)

@@ -330,7 +330,7 @@ class WatchClient(TelemetryOutlet):
             self._thread.join(timeout=2.0)
             self._thread = None
         if self.link_state != LinkState.CLOSED:
-            self._set_state(LinkState.CLOSED, "")
+            self._set_state(LinkState.CLOSED, "this console stopped watching")
 
     def __enter__(self) -> "WatchClient":
         return self.start()

@@ -146,3 +146,28 @@ def test_a_campaign_publishes_for_watching_consoles(dictionary, tmp_path, capsys
     assert not runner.is_alive() and result["code"] == 0
     assert sum(seen) > 1000                       # the runs' telemetry, decoded by the viewer
     assert "UPLOAD_COMMIT" in commands or "ARM" in commands
+
+
+def test_a_watch_says_when_the_commanders_session_ends_and_why_it_closes(rig, dictionary):
+    """After the commander closes its device link, a watching console says so in words -
+    not "commander's link closed: " with nothing after it, nor "commander: up" from a
+    stale hello - and its own end has a reason ("watch closed: " was empty)."""
+    from groundstation.fanout.commands import status_line
+
+    _, client, pub = rig
+    remote, own = [], []
+    viewer = WatchClient(dictionary, pub.endpoint)
+    viewer.add_remote_listener(lambda state, message: remote.append((state, message)))
+    viewer.add_link_listener(lambda state, message: own.append((state, message)))
+    viewer.start()
+    try:
+        viewer.wait_up(timeout=10)
+        assert "commander: up" in status_line(viewer)
+        client.close()                       # the commander's session ends
+        wait_for(lambda: any(state == "closed" for state, _ in remote), timeout=10)
+        assert all(message for _, message in remote), remote
+        pub.detach()                         # and it publishes hellos with no device link
+        wait_for(lambda: "no device link" in status_line(viewer), timeout=10)
+    finally:
+        viewer.close()
+    assert own[-1] == ("closed", "this console stopped watching")
