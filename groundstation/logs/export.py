@@ -11,6 +11,11 @@ one field per channel (column vectors), device_time, host_time, and structs `uni
 `description` with the same field names; plus a `log_info` struct saying where the data
 came from.  Names are made MATLAB-valid (anything but letters, digits and _ becomes _).
 
+With `relative=True` (--from/--to counted from the log's start) both also carry
+`time_from_start` first: the chosen timebase's time minus the log's origin (the zero of
+those bounds), so the exported times match the bounds asked for; device_time and
+host_time stay absolute for tracing the rows back to the log.
+
 Both are written to a temporary file beside the target and renamed when complete, so a
 failure never leaves a partial file (`atomic.py`).  A damaged log raises LogDamagedError
 (an error of the input, not of the output); with `salvage=True` the rows before the
@@ -161,8 +166,12 @@ def export_csv(reader: LogReader, path: str | Path, packet: str,
 
 
 def _write_csv(reader: LogReader, path: Path, packet: str, chans: list[Channel], i0: int, i1: int,
-               raw: bool, chunk_rows: int) -> int:
-    header = ["device_time [s]", "host_time [s]"] + [
+               raw: bool, chunk_rows: int, timebase: str = "device",
+               zero: float | None = None) -> int:
+    """`zero`: the log's origin in `timebase` when the range is relative - a first
+    column time_from_start is then written."""
+    header = (["time_from_start [s]"] if zero is not None else []) + [
+        "device_time [s]", "host_time [s]"] + [
         _header_name(c.name, "counts" if raw and c.has_raw else c.units) for c in chans]
     names = [c.name for c in chans]
     written = 0
@@ -172,6 +181,8 @@ def _write_csv(reader: LogReader, path: Path, packet: str, chans: list[Channel],
             for a in range(i0, i1, chunk_rows):
                 data = reader.read_rows(packet, names, a, min(i1, a + chunk_rows), raw=raw)
                 cols = [data["device_time"], data["host_time"]] + [data[n] for n in names]
+                if zero is not None:
+                    cols.insert(0, data[f"{timebase}_time"] - zero)
                 m = len(cols[0])
                 if not m:
                     break
@@ -215,8 +226,10 @@ def export(reader: LogReader, path: str | Path, packet: str, fmt: str = "csv",
     path = Path(path)
     chans, i0, i1, wanted, damage = _plan(reader, packet, channels, start, stop, timebase,
                                           relative, raw, salvage)
+    zero = reader.origin(timebase) if relative else None
     if fmt == "csv":
-        rows = _write_csv(reader, path, packet, chans, i0, i1, raw, chunk_rows)
+        rows = _write_csv(reader, path, packet, chans, i0, i1, raw, chunk_rows,
+                          timebase, zero)
     else:
         rows = _write_mat(reader, path, packet, chans, i0, i1, raw, start, stop, timebase,
                           relative)
@@ -237,15 +250,21 @@ def _write_mat(reader: LogReader, path: Path, packet: str, chans: list[Channel],
 
     data = reader.read_rows(packet, [c.name for c in chans], i0, i1, raw=raw)
     fields: dict[str, str] = {}                  # matlab name -> channel name
-    for name in ["device_time", "host_time"] + [c.name for c in chans]:
+    times = ["device_time", "host_time"]
+    if relative:            # the times the --from/--to bounds were given in (see above)
+        data["time_from_start"] = data[f"{timebase}_time"] - reader.origin(timebase)
+        times.insert(0, "time_from_start")
+    for name in times + [c.name for c in chans]:
         m = matlab_name(name)
         if m in fields and fields[m] != name:
             raise ExportError(f"channels '{fields[m]}' and '{name}' both become the MATLAB "
                               f"name '{m}'; export them separately")
         fields[m] = name
-    units = {"device_time": "s", "host_time": "s"}
+    units = {"device_time": "s", "host_time": "s", "time_from_start": "s"}
     descr = {"device_time": "device tick / tick rate: device time since boot",
-             "host_time": "host arrival time, seconds since the Unix epoch"}
+             "host_time": "host arrival time, seconds since the Unix epoch",
+             "time_from_start": f"{timebase} time from the log's start (the zero of a "
+                                f"relative --from/--to)"}
     for c in chans:
         units[c.name] = "counts" if raw and c.has_raw else c.units
         descr[c.name] = c.description

@@ -49,13 +49,23 @@ def test_record_info_export_and_redecode(tmp_path):
     ex = gs("log", "export", str(log), "--channels", "encoder_outer,gyro_rate",
             "--from", "0.5", "--to", "1.0", "--relative", "-o", str(csv))
     assert ex.returncode == 0, ex.stderr
+    assert csv.read_text().splitlines()[0].startswith("time_from_start [s],device_time [s],")
     table = np.loadtxt(csv, delimiter=",", skiprows=1)
-    assert table.shape == (601, 4)
+    assert table.shape == (601, 5)
     assert np.allclose(np.diff(table[:, 0]), 1 / 1200)
+    # relative bounds, relative times: the first column lies within the window asked for
+    assert 0.5 <= table[0, 0] < 0.5 + 1 / 1200 and table[-1, 0] <= 1.0
+    assert np.allclose(table[:, 1] - table[:, 0], table[0, 1] - table[0, 0])   # absolute kept
     mat = tmp_path / "x.mat"
     assert gs("log", "export", str(log), "--format", "mat", "-o", str(mat)).returncode == 0
     m = scipy.io.loadmat(mat, squeeze_me=True, struct_as_record=False)
     assert len(m["HIGH_RATE"].encoder_outer) == n
+    assert not hasattr(m["HIGH_RATE"], "time_from_start")          # absolute range: none
+    assert gs("log", "export", str(log), "--format", "mat", "-o", str(mat), "--from", "0.5",
+              "--to", "1.0", "--relative").returncode == 0
+    rel = scipy.io.loadmat(mat, squeeze_me=True, struct_as_record=False)["HIGH_RATE"]
+    assert 0.5 <= rel.time_from_start[0] < 0.5 + 1 / 1200 and rel.time_from_start[-1] <= 1.0
+    assert rel.units.time_from_start == "s"
 
     rp = gs("replay", "--headless", str(log))       # the link statistics, no window
     assert rp.returncode == 0, rp.stderr
