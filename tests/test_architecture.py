@@ -105,7 +105,7 @@ LAYERS = [
     ("codec",),                                           # frames, CRC, sequence and tick counting
     ("link", "plant", "live", "instruments", "profiles", "firmware_kit"),
     ("logs", "params"),                                   # the recorder reads the link's blocks
-    ("sim", "analysis", "fanout"),                        # the twin, the metrics, the consoles
+    ("sim", "analysis", "fanout", "conformance"),         # twin, metrics, consoles, suite
     ("basemotion", "identification"),                     # generator profiles; the rig's own twin
     ("station",),                                         # one session: rig, clock, recording
     ("campaign",),

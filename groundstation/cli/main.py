@@ -265,7 +265,7 @@ def _add_deviate_option(s) -> None:
     that parsing the command line imports nothing."""
     s.add_argument("--deviate", action="append", default=None, metavar="NAME",
                    choices=["crc-range", "retry-twice", "watchdog-x2", "commit-no-crc",
-                            "profile-late", "foreign-host"],
+                            "profile-late", "foreign-host", "shared-history"],
                    help="test only: break one rule of the SPEC on purpose, to show that "
                         "`groundstation conformance` catches it")
 

@@ -144,10 +144,44 @@ def disconnect_ends_session(ctx: Context, v: Verdict) -> None:
     v.expect(ctx.is_ok(back), f"a new CONNECT opens a session again: {ctx.outcome(back)}")
 
 
+def replay_only_on_its_connection(ctx: Context, v: Verdict) -> None:
+    """§6.4: the retry history is kept per connection.  Another connection that sends the
+    owner's CONNECT byte for byte is a new command - SESSION_BUSY - and must never get the
+    owner's recorded reply, which carries the session token: with one history for all
+    connections, any host on the network could read the token by guessing a sequence
+    number and command the rig."""
+    other = ctx.other_host()
+    h = ctx.host
+    built = h.build("CONNECT", {
+        "protocol_major": ctx.d.version_major, "protocol_minor": ctx.d.version_minor,
+        "dictionary_hash": ctx.d.hash, "telemetry_port": h.telemetry_port, "take_over": 0},
+        token=0)
+    mine = h.exchange("CONNECT", frame=built)
+    v.note(f"the owner sent CONNECT seq {built[1]} on its own connection: {ctx.outcome(mine)}")
+    if not v.expect(ctx.is_ok(mine), "§7: a CONNECT on the owner's own connection completes"):
+        return
+    token = h.reply(mine, "CONNECT")["session_token"]
+    h.token = token
+    h.session_changed()
+    theirs = other.exchange("CONNECT", frame=built, resend=False)
+    v.note(f"a second connection sent the identical frame: {ctx.outcome(theirs)}")
+    v.expect(ctx.refused(theirs, 2, "SESSION_BUSY"),
+             "§6.4/§7: a new command on that connection, REJECTED SESSION_BUSY (5) - not a "
+             "replay of the owner's answer")
+    leaked = [s for s in theirs.stages if token.to_bytes(4, "big") in s.data]
+    v.expect(not leaked, "the owner's session token appears in no response to the other "
+                         "connection")
+    mine_still = h.exchange("HEARTBEAT", {})
+    v.expect(ctx.is_ok(mine_still), f"the owner's session goes on: HEARTBEAT "
+                                    f"{ctx.outcome(mine_still)}")
+
+
 CHECKS = [
     Check("§7", "CONNECT reply and fresh session on the owner's connection", connect_reply),
     Check("§8", "dictionary hash mismatch refused at CONNECT", dictionary_mismatch),
     Check("§7", "foreign host refused, token and ownership", foreign_host_refused),
+    Check("§6.4", "a replay is only for the connection that sent the command",
+          replay_only_on_its_connection),
     Check("§7", "take-over", take_over),
     Check("§7", "ABORT always accepted", abort_always),
     Check("§7", "DISCONNECT ends the session and its telemetry", disconnect_ends_session),

@@ -11,6 +11,8 @@ a no-op and the simulated device behaves exactly as before.
     commit-no-crc   PARAM_COMMIT activates a table whatever its CRC (§11.1)
     profile-late    a profile plays one control period late (§11.2)
     foreign-host    a second host's CONNECT is accepted without take_over (§7)
+    shared-history  one retry history for all connections: another host that repeats the
+                    owner's CONNECT sequence gets the owner's answer and its token (§6.4)
 """
 
 from __future__ import annotations
@@ -18,7 +20,7 @@ from __future__ import annotations
 import zlib
 
 NAMES = ("crc-range", "retry-twice", "watchdog-x2", "commit-no-crc", "profile-late",
-         "foreign-host")
+         "foreign-host", "shared-history")
 
 # telemetry packet ids (SPEC §1): the CRC deviation spares the command channel so the
 # suite can still open a session and see the broken frames
@@ -55,6 +57,10 @@ class Deviations:
         # the engine plays sample `pos` and reports index pos + 1: starting at -1 leaves
         # the first period without an index, every sample one period late
         return -1.0 if "profile-late" in self.names else 0.0
+
+    @property
+    def history_per_connection(self) -> bool:
+        return "shared-history" not in self.names
 
     @property
     def connect_ignores_owner(self) -> bool:

@@ -88,7 +88,7 @@ class Firmware:
         self.rejected = 0
         self.overruns = 0
         self.events: deque[tuple[int, int, str]] = deque(maxlen=256)
-        self._done: OrderedDict[tuple[int, int], list[Stage]] = OrderedDict()
+        self._done: OrderedDict[tuple[Any, int, int], list[Stage]] = OrderedDict()
         self._emit("INFO", "BOOT", f"firmware {self.version_string} booted: {self.testbed.name}")
 
     # ------------------------------------------------------------------ state views
@@ -153,7 +153,9 @@ class Firmware:
     def handle_command(self, sequence: int, token: int, opcode: int, args: bytes,
                        peer: Any = None) -> list[Stage]:
         """Check and execute one COMMAND; returns the RESPONSE stages to send."""
-        key = (sequence, opcode)
+        # per connection (SPEC §6.4): another host's identical frame is its own command,
+        # never a replay of the owner's answer (which would hand it the session token)
+        key = (peer if self.deviations.history_per_connection else None, sequence, opcode)
         if key in self._done and not self.deviations.replays_execute:   # a retry: answer again, never execute twice
             return self._done[key]
         try:

@@ -38,6 +38,7 @@ def test_the_reference_device_passes_every_check(built, capsys):
     ("commit-no-crc", "§11.1", "11.1"),
     ("profile-late", "§11.2", "11.2"),
     ("foreign-host", "§7", "7"),
+    ("shared-history", "§6.4", "6.4"),
 ])
 def test_its_deviations_are_caught_in_their_sections(built, deviation, section, only, capsys):
     with reference.running_reference_device(deviation) as address:

@@ -116,6 +116,7 @@ def _assert_state(d, address, blob, version):
     ("commit-no-crc", "§11.1", "11.1"),
     ("profile-late", "§11.2", "11.2"),
     ("foreign-host", "§7", "7"),
+    ("shared-history", "§6.4", "6.4"),
 ])
 def test_each_deviation_is_caught_in_its_section(deviation, section, only, tmp_path, capsys):
     sim = SimulatorProcess(pacing="realtime", deviations=(deviation,))
@@ -185,5 +186,7 @@ def test_over_a_serial_line_the_checks_of_other_hosts_skip(capsys):
     assert code == 0, out
     skipped = {title for status, _, title in printed if status == "SKIP"}
     assert skipped == {"foreign host refused, token and ownership", "take-over",
+                       "a replay is only for the connection that sent the command",
                        "telemetry from the command port"}, out
     assert "§8" in {section for status, section, _ in printed if status == "PASS"}
+

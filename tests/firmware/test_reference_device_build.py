@@ -13,7 +13,7 @@ from reference_device_helpers import (FIRMWARE_DIR, _read_line, build_reference_
                                       running_reference_device)
 
 DEVIATIONS = ("crc-range", "retry-twice", "watchdog-x2", "commit-no-crc", "profile-late",
-              "foreign-host")
+              "foreign-host", "shared-history")
 
 
 def test_kit_committed_is_a_fresh_export(tmp_path):

@@ -3,7 +3,7 @@
  *
  * Every intact COMMAND frame (the kit's deframer, SPEC 4.1, found it on one connection)
  * comes here.  In order:
- *   - the retry history (SPEC 6.4), before any check: a known (sequence, opcode) pair
+ *   - the retry history (SPEC 6.4), before any check: a known (connection, sequence, opcode)
  *     gets its recorded RESPONSE payloads again, in new frames, and nothing else;
  *   - the checks of SPEC 6.3 in their order: opcode, length, session token, argument
  *     ranges, state rules; the first failure is the REJECTED reason;
@@ -62,23 +62,32 @@ static void accept_and_complete(int c, uint32_t seq, uint16_t op, const uint8_t 
 }
 
 /* ---- retries (SPEC 6.4) -------------------------------------------------------------- */
-static history_entry_t *history_find(uint32_t seq, uint16_t op)
+/* Keyed by connection too: a retry always comes on the connection of the original, and a
+   history shared by all connections would hand another host the owner's recorded CONNECT
+   reply - the session token - for the price of guessing a sequence number. */
+static uint32_t history_key(int c)
+{
+    return (dev.deviations & DEV_SHARED_HISTORY) ? 0u : dev.conn[c].serial;
+}
+
+static history_entry_t *history_find(uint32_t conn, uint32_t seq, uint16_t op)
 {
     int i;
     for (i = 0; i < HISTORY_SIZE; i++) {
         history_entry_t *h = &dev.history[i];
-        if (h->used && h->sequence == seq && h->opcode == op) {
+        if (h->used && h->connection == conn && h->sequence == seq && h->opcode == op) {
             return h;
         }
     }
     return NULL;
 }
 
-static history_entry_t *history_new(uint32_t seq, uint16_t op)
+static history_entry_t *history_new(uint32_t conn, uint32_t seq, uint16_t op)
 {
     history_entry_t *h = &dev.history[dev.history_next];   /* the oldest is forgotten */
     dev.history_next = (dev.history_next + 1) % HISTORY_SIZE;
     h->used = 1;
+    h->connection = conn;
     h->sequence = seq;
     h->opcode = op;
     h->n = 0;
@@ -536,12 +545,12 @@ void commands_on_frame(void *context, const uint8_t *frame, size_t length)
         return;                              /* a host sends only COMMAND; the rest is ignored */
     }
     /* SPEC 6.4: the history is looked up before any check */
-    h = history_find(view.sequence, cmd.opcode);
+    h = history_find(history_key(c), view.sequence, cmd.opcode);
     if (h != NULL && !(dev.deviations & DEV_RETRY_TWICE)) {
         replay(c, h);
         return;
     }
-    recording = history_new(view.sequence, cmd.opcode);
+    recording = history_new(history_key(c), view.sequence, cmd.opcode);
     dispatch(c, view.sequence, &cmd);
     recording = NULL;
 }

@@ -37,7 +37,8 @@ enum {
     DEV_WATCHDOG_X2 = 1u << 2,    /* the watchdog waits twice the table's timeout */
     DEV_COMMIT_NO_CRC = 1u << 3,  /* PARAM_COMMIT ignores the CRC */
     DEV_PROFILE_LATE = 1u << 4,   /* a profile plays one sample late */
-    DEV_FOREIGN_HOST = 1u << 5    /* a second host's CONNECT wins without take_over */
+    DEV_FOREIGN_HOST = 1u << 5,   /* a second host's CONNECT wins without take_over */
+    DEV_SHARED_HISTORY = 1u << 6  /* one retry history for all connections */
 };
 
 /* ---- one second-order-section cascade (SPEC 10.1, direct form II transposed) ------ */
@@ -56,6 +57,7 @@ typedef struct {
 /* ---- a TCP command connection (net.c) ----------------------------------------------- */
 typedef struct {
     int fd;                       /* -1: slot free */
+    uint32_t serial;              /* this connection's number: slots are reused, these not */
     uint32_t peer_ip;             /* network byte order */
     uint16_t peer_port;           /* host byte order */
     hfb_deframer_t rx;
@@ -66,6 +68,7 @@ typedef struct {
 /* ---- one remembered command with the RESPONSE payloads sent for it (SPEC 6.4) ------ */
 typedef struct {
     int used;
+    uint32_t connection;          /* the serial of the connection it came on (SPEC 6.4) */
     uint32_t sequence;
     uint16_t opcode;
     int n;                        /* payloads recorded: 1 (REJECTED) or 2 */
@@ -103,6 +106,7 @@ typedef struct {
     /* retries (SPEC 6.4): a ring of the last HISTORY_SIZE commands */
     history_entry_t history[HISTORY_SIZE];
     int history_next;
+    uint32_t next_connection_serial;
 
     /* modes and control (SPEC 10) */
     uint8_t mode;

@@ -41,6 +41,7 @@ static const struct {
     {"commit-no-crc", DEV_COMMIT_NO_CRC},
     {"profile-late", DEV_PROFILE_LATE},
     {"foreign-host", DEV_FOREIGN_HOST},
+    {"shared-history", DEV_SHARED_HISTORY},
 };
 #define N_DEVIATIONS (sizeof DEVIATIONS / sizeof DEVIATIONS[0])
 

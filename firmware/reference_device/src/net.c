@@ -96,6 +96,7 @@ static void accept_new(void)
         /* responses are small and latency matters more than packing (SPEC 5.5 RTT) */
         (void)setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
         dev.conn[i].fd = fd;
+        dev.conn[i].serial = ++dev.next_connection_serial;
         dev.conn[i].peer_ip = peer.sin_addr.s_addr;
         dev.conn[i].peer_port = ntohs(peer.sin_port);
         dev.conn[i].out_len = 0;
