@@ -383,13 +383,19 @@ class SimulatedDevice:
         return frames
 
     def _flush_events(self) -> None:
+        if self._telemetry_target() is None:
+            # sent to nobody: not numbered either (SPEC §2: a frame not sent does not use
+            # up a sequence number)
+            self.firmware.events.clear()
+            return
         self._send_telemetry(self._event_frames(), frame_groups=False)
 
     def run_ticks(self, n: int) -> None:
         """Advance the device by n control periods and send their telemetry."""
         with self._lock:
-            frames, hk_frames = self._simulate(n)
-            if self._telemetry_target() is not None:
+            sending = self._telemetry_target() is not None
+            frames, hk_frames = self._simulate(n, encode=sending)
+            if sending:
                 self._send_telemetry(frames, frame_groups=True)
                 self._send_telemetry(hk_frames, frame_groups=False)
             self._flush_events()
@@ -411,12 +417,14 @@ class SimulatedDevice:
                 return None
             if unless_faulted and self.firmware.fault:
                 return None
-            frames, hk_frames = self._simulate(n)
+            target = self._telemetry_target()
+            frames, hk_frames = self._simulate(n, encode=target is not None)
             # EVENTs and HOUSEKEEPING first, HIGH_RATE last: the arrival of the last
             # HIGH_RATE frame then tells the clock that all of it has arrived (one socket to
             # one socket keeps the datagrams' order)
+            if target is None:
+                self.firmware.events.clear()     # to nobody: not numbered (SPEC §2)
             events = self._event_frames()
-            target = self._telemetry_target()
             if target is not None and target[0] == "udp" and datagram_bytes:
                 # these packed too: every datagram is a send here and a receive in the
                 # host, and each of those lets another thread take the interpreter
@@ -464,11 +472,13 @@ class SimulatedDevice:
             if fw.session_token is not None:
                 fw.fw[core.FW_LAST_HEARD] = fw.tick
 
-    def _simulate(self, n: int) -> tuple[list[bytes], list[bytes]]:
+    def _simulate(self, n: int, encode: bool = True) -> tuple[list[bytes], list[bytes]]:
         """n periods -> HIGH_RATE frames (one per period) and HOUSEKEEPING frames (10 Hz).
 
         The batch is cut at housekeeping boundaries so each HOUSEKEEPING frame carries
-        the state of its own tick: batch sizes never change what is sent."""
+        the state of its own tick: batch sizes never change what is sent.  With `encode`
+        False (nobody to send them to) the periods run but no frame is made: nothing is
+        encoded for nobody, and no sequence number is used up (SPEC §2)."""
         fw = self.firmware
         every = self.housekeeping_divider
         hr = self.dictionary.packet("HIGH_RATE")
@@ -482,6 +492,9 @@ class SimulatedDevice:
             cols, truth = fw.run(step, v_fg)
             if self.truth_sink is not None:
                 self.truth_sink(first_tick, truth)
+            done += step
+            if not encode:
+                continue
             seq = self._seq["HIGH_RATE"]
             self._seq["HIGH_RATE"] = (seq + step) & 0xFFFFFFFF
             data = self.codec.encode(hr, cols, np.arange(seq, seq + step),
@@ -491,7 +504,6 @@ class SimulatedDevice:
             if fw.tick % every == 0:
                 hk_frames.append(self.codec.encode(
                     "HOUSEKEEPING", fw.housekeeping(), [self._next_seq("HOUSEKEEPING")], [fw.tick]))
-            done += step
         return frames, hk_frames
 
     def run_fast(self, seconds: float, consumer: Callable[[bytes], None],
