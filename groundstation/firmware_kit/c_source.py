@@ -4,7 +4,7 @@ length rules, pack/unpack of every layout, and the default parameter table."""
 from __future__ import annotations
 
 from ..core.dictionary import Dictionary
-from . import c_templates as T
+from . import c_source_templates as T
 from .c_header import CRC_POLY_REFLECTED, Layouts
 from .layout import (C_TYPES, Record, c_bound, c_number, c_string, default_table, lower, macro, max_dims,
                      record, type_enum)
