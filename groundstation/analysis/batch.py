@@ -134,6 +134,10 @@ def _report_entries(report: Path) -> list[tuple[str, dict[str, Any]]]:
     if not isinstance(data["campaign"], str) or not isinstance(data["recordings"], list):
         raise _NotAReport("'campaign' is not text or 'recordings' not a list: not a campaign "
                           "report")
+    # the simulator's seed of the whole campaign (report.setup, written by `campaign run`)
+    # when the matrix does not vary it: the table's seed column was all NA without it
+    setup = data.get("setup") if isinstance(data.get("setup"), dict) else {}
+    campaign_seed = setup.get("seed")
     entries = []
     for i, rec in enumerate(data["recordings"], 1):
         files = rec.get("files", []) if isinstance(rec, dict) else None
@@ -145,7 +149,7 @@ def _report_entries(report: Path) -> list[tuple[str, dict[str, Any]]]:
             raise _NotAReport(f"recording {i} is not a campaign report's (a run number, "
                               f"its files' names, its variables)")
         v = variables
-        seed = v.get("seed")
+        seed = v.get("seed", campaign_seed)
         ident = {"campaign": data["campaign"], "campaign_run": run,
                  "design": _text_or_none(v.get("design_stem", v.get("design"))),
                  "base_motion": _text_or_none(v.get("base_motion_stem", v.get("base_motion"))),

@@ -76,6 +76,8 @@ def folder(tmp_path_factory) -> Path:
                  log_folder=camp, history=top / "history") as tb:
         report = CampaignRunner(c, tb).run()
     assert report.status == "completed", report.summary()
+    # as `campaign run` writes it (cli/campaign.py): how it was run, the seed included
+    report.setup = {"device": "sim", "fast": True, "seed": SEED_CAMPAIGN}
     report.save(camp / "report.json")
     script = top / "script"
     with Testbed("sim", testbed=ROOT / "profiles/testbeds/inertial_2dof.toml", fast=True,
@@ -128,7 +130,7 @@ def test_each_row_says_who_the_run_was(serial_rows):
         assert row["test_name"] == f"batch_test_{design}" and row["clean_close"] is True
         assert row["error"] == "" and row["frames"] >= 1200 and row["std_urad"] is not None
         assert row["bytes"] == Path(row["path"]).stat().st_size
-        assert row["seed"] is None           # the station does not record the simulator's seed
+        assert row["seed"] == SEED_CAMPAIGN  # the campaign's simulator seed, from its report
     # no campaign report beside it: the log's own record, the seed from its notes
     assert (script["campaign"], script["campaign_run"], script["design"]) == ("", None, "")
     assert script["seed"] == SEED_SCRIPT and script["error"] == ""
