@@ -6,7 +6,8 @@
  *   - the retry history (SPEC 6.4), before any check: a known (connection, sequence, opcode)
  *     gets its recorded RESPONSE payloads again, in new frames, and nothing else;
  *   - the checks of SPEC 6.3 in their order: opcode, length, session token, argument
- *     ranges, state rules; the first failure is the REJECTED reason;
+ *     ranges (the dictionary's), then each command's own rules (state, staging, its own
+ *     bounds); the first failure is the REJECTED reason;
  *   - ACCEPTED, execution, COMPLETED or FAILED.
  * Every command finishes within the same pass of the loop, between two control periods,
  * so no command is ever "still executing" when its retry arrives.
@@ -110,7 +111,6 @@ static void replay(int c, const history_entry_t *h)
 static void cmd_set_mode(int c, uint32_t seq, uint16_t op, const uint8_t *a)
 {
     uint8_t m = hfb_get_u8(a + HFB_CMD_SET_MODE_ARGS_MODE_OFFSET);
-    dev.watchdog_reset_tick = dev.tick;
     if (m != HFB_CMD_SET_MODE_ARGS_MODE_IDLE && dev.armed) {
         reject(c, seq, op, HFB_ERR_INVALID_STATE);           /* SPEC 10: only while disarmed */
         return;
@@ -125,7 +125,6 @@ static void cmd_set_mode(int c, uint32_t seq, uint16_t op, const uint8_t *a)
 
 static void cmd_arm(int c, uint32_t seq, uint16_t op)
 {
-    dev.watchdog_reset_tick = dev.tick;
     if (dev.fault_code != HFB_PKT_HOUSEKEEPING_FAULT_CODE_NONE) {
         reject(c, seq, op, HFB_ERR_FAULT_LATCHED);
         return;
@@ -143,7 +142,6 @@ static void cmd_arm(int c, uint32_t seq, uint16_t op)
 
 static void cmd_disarm(int c, uint32_t seq, uint16_t op)
 {
-    dev.watchdog_reset_tick = dev.tick;
     respond(c, seq, op, HFB_PKT_RESPONSE_STAGE_ACCEPTED, HFB_ERR_OK, NULL, 0);
     if (dev.armed) {
         control_disarm("DISARM", 1);
@@ -172,7 +170,6 @@ static void cmd_abort(int c, uint32_t seq, uint16_t op)
 static void cmd_friction_comp(int c, uint32_t seq, uint16_t op, const uint8_t *a)
 {
     uint8_t e = hfb_get_u8(a + HFB_CMD_FRICTION_COMP_ARGS_ENABLE_OFFSET);
-    dev.watchdog_reset_tick = dev.tick;
     dev.friction_comp_on = e;
     accept_and_complete(c, seq, op, NULL, 0);
 }
@@ -181,7 +178,6 @@ static void cmd_set_currents(int c, uint32_t seq, uint16_t op, const uint8_t *a)
 {
     float i1 = hfb_get_f32(a + HFB_CMD_SET_CURRENTS_ARGS_CURRENT_COARSE_OFFSET);
     float i2 = hfb_get_f32(a + HFB_CMD_SET_CURRENTS_ARGS_CURRENT_FINE_OFFSET);
-    dev.watchdog_reset_tick = dev.tick;
     if (dev.mode != HFB_PKT_HIGH_RATE_MODE_OPEN_LOOP) {
         reject(c, seq, op, HFB_ERR_INVALID_STATE);
         return;
@@ -198,7 +194,6 @@ static void cmd_set_currents(int c, uint32_t seq, uint16_t op, const uint8_t *a)
 static void cmd_set_reference(int c, uint32_t seq, uint16_t op, const uint8_t *a)
 {
     float r = hfb_get_f32(a + HFB_CMD_SET_REFERENCE_ARGS_REFERENCE_OFFSET);
-    dev.watchdog_reset_tick = dev.tick;
     if (dev.mode != HFB_PKT_HIGH_RATE_MODE_RELATIVE && dev.mode != HFB_PKT_HIGH_RATE_MODE_INERTIAL) {
         reject(c, seq, op, HFB_ERR_INVALID_STATE);
         return;
@@ -216,7 +211,6 @@ static void cmd_param_begin(int c, uint32_t seq, uint16_t op, const uint8_t *a)
         reject(c, seq, op, HFB_ERR_OUT_OF_RANGE);
         return;
     }
-    dev.watchdog_reset_tick = dev.tick;
     respond(c, seq, op, HFB_PKT_RESPONSE_STAGE_ACCEPTED, HFB_ERR_OK, NULL, 0);
     free(dev.param_staging);                 /* discards any earlier staging */
     dev.param_staging = calloc(length, 1);   /* zero-filled */
@@ -233,9 +227,8 @@ static void cmd_param_write(int c, uint32_t seq, uint16_t op, const uint8_t *a, 
 {
     uint32_t offset = hfb_get_u32(a + HFB_CMD_PARAM_WRITE_ARGS_OFFSET_OFFSET);
     size_t len = n - HFB_CMD_PARAM_WRITE_ARGS_SIZE;
-    /* the offset can only be judged against a staging, so NOTHING_STAGED comes first */
+    /* SPEC 6.3: the offset is judged against the staging, after NOTHING_STAGED */
     if (dev.param_staging == NULL) {
-        dev.watchdog_reset_tick = dev.tick;
         reject(c, seq, op, HFB_ERR_NOTHING_STAGED);
         return;
     }
@@ -243,7 +236,6 @@ static void cmd_param_write(int c, uint32_t seq, uint16_t op, const uint8_t *a, 
         reject(c, seq, op, HFB_ERR_OUT_OF_RANGE);
         return;
     }
-    dev.watchdog_reset_tick = dev.tick;
     memcpy(dev.param_staging + offset, a + HFB_CMD_PARAM_WRITE_ARGS_DATA_OFFSET, len);
     accept_and_complete(c, seq, op, NULL, 0);
 }
@@ -254,7 +246,6 @@ static void cmd_param_commit(int c, uint32_t seq, uint16_t op, const uint8_t *a)
     char why[200];
     hfb_cmd_param_commit_reply_t reply;
     uint8_t data[HFB_CMD_PARAM_COMMIT_REPLY_SIZE];
-    dev.watchdog_reset_tick = dev.tick;
     if (dev.param_staging == NULL) {
         reject(c, seq, op, HFB_ERR_NOTHING_STAGED);
         return;
@@ -302,7 +293,6 @@ static void cmd_param_read(int c, uint32_t seq, uint16_t op, const uint8_t *a)
         reject(c, seq, op, HFB_ERR_OUT_OF_RANGE);
         return;
     }
-    dev.watchdog_reset_tick = dev.tick;
     reply.offset = offset;
     reply.data = dev.table + offset;
     reply.data_len = count;
@@ -316,7 +306,6 @@ static void cmd_profile_begin(int c, uint32_t seq, uint16_t op, const uint8_t *a
     uint16_t id = hfb_get_u16(a + HFB_CMD_PROFILE_BEGIN_ARGS_PROFILE_ID_OFFSET);
     uint8_t target = hfb_get_u8(a + HFB_CMD_PROFILE_BEGIN_ARGS_TARGET_OFFSET);
     uint32_t count = hfb_get_u32(a + HFB_CMD_PROFILE_BEGIN_ARGS_SAMPLE_COUNT_OFFSET);
-    dev.watchdog_reset_tick = dev.tick;
     if (dev.profile_playing) {
         reject(c, seq, op, HFB_ERR_INVALID_STATE);
         return;
@@ -339,7 +328,6 @@ static void cmd_profile_write(int c, uint32_t seq, uint16_t op, const uint8_t *a
     uint32_t offset = hfb_get_u32(a + HFB_CMD_PROFILE_WRITE_ARGS_OFFSET_OFFSET);
     size_t samples = (n - HFB_CMD_PROFILE_WRITE_ARGS_SIZE) / 4u;
     if (dev.profile_staging == NULL) {
-        dev.watchdog_reset_tick = dev.tick;
         reject(c, seq, op, HFB_ERR_NOTHING_STAGED);
         return;
     }
@@ -347,7 +335,6 @@ static void cmd_profile_write(int c, uint32_t seq, uint16_t op, const uint8_t *a
         reject(c, seq, op, HFB_ERR_OUT_OF_RANGE);
         return;
     }
-    dev.watchdog_reset_tick = dev.tick;
     memcpy(dev.profile_staging + (size_t)offset * 4u, a + HFB_CMD_PROFILE_WRITE_ARGS_SAMPLES_OFFSET,
            samples * 4u);
     accept_and_complete(c, seq, op, NULL, 0);
@@ -357,9 +344,14 @@ static void cmd_profile_commit(int c, uint32_t seq, uint16_t op, const uint8_t *
 {
     uint32_t crc = hfb_get_u32(a + HFB_CMD_PROFILE_COMMIT_ARGS_PROFILE_CRC_OFFSET);
     uint32_t i;
-    dev.watchdog_reset_tick = dev.tick;
     if (dev.profile_staging == NULL) {
         reject(c, seq, op, HFB_ERR_NOTHING_STAGED);
+        return;
+    }
+    /* SPEC 11.2: never swap the samples under playback (possible only with a staging
+       opened before the start, since PROFILE_BEGIN is refused while playing) */
+    if (dev.profile_playing) {
+        reject(c, seq, op, HFB_ERR_INVALID_STATE);
         return;
     }
     respond(c, seq, op, HFB_PKT_RESPONSE_STAGE_ACCEPTED, HFB_ERR_OK, NULL, 0);
@@ -373,11 +365,6 @@ static void cmd_profile_commit(int c, uint32_t seq, uint16_t op, const uint8_t *
             return;
         }
     }
-    /* a commit while the old profile plays: playback stops (BEGIN refuses while playing,
-       so this only happens with a staging opened before the start) */
-    if (dev.profile_playing) {
-        profile_stop(1);
-    }
     free(dev.profile);
     dev.profile = dev.profile_staging;       /* the staging is consumed */
     dev.profile_count = dev.profile_staging_count;
@@ -389,7 +376,6 @@ static void cmd_profile_commit(int c, uint32_t seq, uint16_t op, const uint8_t *
 
 static void cmd_profile_start(int c, uint32_t seq, uint16_t op)
 {
-    dev.watchdog_reset_tick = dev.tick;
     if (dev.profile == NULL) {
         reject(c, seq, op, HFB_ERR_NOTHING_STAGED);
         return;
@@ -409,7 +395,6 @@ static void cmd_profile_start(int c, uint32_t seq, uint16_t op)
 
 static void cmd_profile_stop(int c, uint32_t seq, uint16_t op)
 {
-    dev.watchdog_reset_tick = dev.tick;
     respond(c, seq, op, HFB_PKT_RESPONSE_STAGE_ACCEPTED, HFB_ERR_OK, NULL, 0);
     if (dev.profile_playing) {
         profile_stop(1);
@@ -440,7 +425,6 @@ static void cmd_heartbeat(int c, uint32_t seq, uint16_t op)
 {
     hfb_cmd_heartbeat_reply_t r;
     uint8_t data[HFB_CMD_HEARTBEAT_REPLY_SIZE];
-    dev.watchdog_reset_tick = dev.tick;
     r.tick = dev.tick;
     (void)hfb_cmd_heartbeat_reply_pack(&r, data, sizeof data);
     accept_and_complete(c, seq, op, data, sizeof data);
@@ -500,9 +484,13 @@ static void dispatch(int c, uint32_t seq, const hfb_pkt_command_t *cmd)
             return;
         }
     }
-    /* the rest of check 4 (bounds of the command's own: staged sizes, the table size),
-       check 5 and execution, per command.  Each handler resets the watchdog once its
-       own bounds passed, as SPEC 9.1 asks. */
+    /* SPEC 9.1: a command with needs_session that passed checks 1-4 resets the watchdog,
+       whatever check 5 then says */
+    if (info->needs_session) {
+        dev.watchdog_reset_tick = dev.tick;
+    }
+    /* check 5 (the command's own bounds - staged sizes, the table size - and the state
+       rules of SPEC 10 and 11, in each command's order) and execution, per command */
     switch (op) {
     case HFB_CMD_CONNECT_OPCODE: session_connect(c, seq, op, a, n); return;
     case HFB_CMD_DISCONNECT_OPCODE: cmd_disconnect(c, seq, op); return;

@@ -14,7 +14,7 @@
 #include "hfb_protocol.h"
 
 #define FIRMWARE_VERSION 0x000100u          /* 0.1.0: major<<16 | minor<<8 | patch */
-#define MAX_CONNECTIONS 4                   /* SPEC 1.1: at least two at once */
+#define MAX_CONNECTIONS 4                   /* SPEC 1.1: at least two at once; more are closed */
 #define HISTORY_SIZE 64                     /* SPEC 6.4: the last 64 commands answered */
 #define CONTROL_PERIOD_S (1.0 / (double)HFB_CONTROL_RATE_HZ)
 #define HOUSEKEEPING_EVERY_TICKS 120u       /* SPEC 5: 10 Hz at 1200 Hz */
@@ -23,8 +23,8 @@
 /* rig constants of the stand-in (SPEC 10.1 "rig constants"; plant.c explains them) */
 #define PEAK_TORQUE_COARSE 81.3             /* in-oz, P1 */
 #define PEAK_TORQUE_FINE 16.1               /* in-oz, P2 */
-/* Kt1, Kt2: SPEC 10.1 names them but gives no value; these are the 2-DOF rigs' values
-   from the testbed files in profiles/testbeds (torque_constant) */
+/* Kt1, Kt2: SPEC 10.1 makes them rig constants built into the device (no command reads
+   them); these are the 2-DOF rigs' values (profiles/testbeds, torque_constant) */
 #define TORQUE_CONSTANT_COARSE 32.1         /* in-oz/A, Kt1 */
 #define TORQUE_CONSTANT_FINE 16.1           /* in-oz/A, Kt2 */
 #define FLEXURE_SAFE_DEFLECTION 0.015       /* rad, SPEC 9.2 (2-DOF rigs of today) */

@@ -10,8 +10,8 @@
  *   SFM types:  T = s (x - 1) T_c;  a reversal goes on from x = 1 + s T / T_c
  *   DHM types:  T = T_k + s x T_c;  a reversal pushes T_k = T and restarts from x = 0
  *
- * SPEC defers the stack bookkeeping to the simulator's friction_step.  What this file
- * does, which agrees with the simulator to ~1e-7 in-oz (tests/firmware checks it):
+ * The stack rules of SPEC 10.1, as this file does them (it agrees with the simulator's
+ * friction_step to ~1e-7 in-oz; tests/firmware checks it):
  *   - the first motion after boot or activation (torque 0, no direction yet) moves
  *     along the outer branch: T_k is the opposite Coulomb level, -s T_c;
  *   - the stack holds the reversal torques above that outer-branch start; a branch

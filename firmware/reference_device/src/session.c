@@ -110,6 +110,9 @@ void session_connect(int c, uint32_t sequence, uint16_t opcode, const uint8_t *a
     dev.watchdog_reset_tick = dev.tick;          /* SPEC 9.1: CONNECT starts the count */
     dev.watchdog_state = HFB_PKT_HOUSEKEEPING_WATCHDOG_OK;
     if (was_open) {
+        /* SPEC 7: SESSION_TAKEN_OVER first, then the safe state's own events */
+        event_send(HFB_PKT_EVENT_LEVEL_WARNING, HFB_EVT_SESSION_TAKEN_OVER,
+                   "session taken over: safe state (disarmed, profile stopped, IDLE)");
         control_safe_state();
     }
 
@@ -117,10 +120,6 @@ void session_connect(int c, uint32_t sequence, uint16_t opcode, const uint8_t *a
     reply.tick = dev.tick;
     (void)hfb_cmd_connect_reply_pack(&reply, data, sizeof data);
     respond(c, sequence, opcode, HFB_PKT_RESPONSE_STAGE_COMPLETED, HFB_ERR_OK, data, sizeof data);
-    if (was_open) {
-        event_send(HFB_PKT_EVENT_LEVEL_WARNING, HFB_EVT_SESSION_TAKEN_OVER,
-                   "session taken over: safe state (disarmed, profile stopped, IDLE)");
-    }
     event_send(HFB_PKT_EVENT_LEVEL_INFO, HFB_EVT_SESSION_OPENED, "session opened");
 }
 
