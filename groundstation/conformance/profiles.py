@@ -66,14 +66,23 @@ def upload(ctx: Context, v: Verdict) -> None:
                  f"HOUSEKEEPING.active_profile {(hk or {}).get('active_profile')} = {PROFILE_ID}")
 
 
+def _loaded_and_armed(ctx: Context, v: Verdict, length: int):
+    """From the safe state: `length` samples uploaded and the device armed in RELATIVE;
+    the samples, or None (the device made safe again) when either failed."""
+    ctx.require_motion()
+    ctx.make_safe()
+    samples = _samples(ctx, length)
+    if not ctx.is_ok(_upload(ctx, v, samples, check_bad_crc=False)) or not _armed_relative(ctx, v):
+        ctx.make_safe()
+        return None
+    return samples
+
+
 def play_sample_exact(ctx: Context, v: Verdict) -> None:
     """§11.2 step 4: in the k-th period after the start HIGH_RATE shows profile_index k and
     uses sample k-1; index 0 again after the last sample."""
-    ctx.require_motion()
-    ctx.make_safe()
-    samples = _samples(ctx, SHORT)
-    if not ctx.is_ok(_upload(ctx, v, samples, check_bad_crc=False)) or not _armed_relative(ctx, v):
-        ctx.make_safe()
+    samples = _loaded_and_armed(ctx, v, SHORT)
+    if samples is None:
         return
     h = ctx.host
     try:
@@ -118,11 +127,8 @@ def play_sample_exact(ctx: Context, v: Verdict) -> None:
 
 def abort_mid_profile(ctx: Context, v: Verdict) -> None:
     """§9.2/§11.2: ABORT during playback stops it within one control period and disarms."""
-    ctx.require_motion()
-    ctx.make_safe()
-    samples = _samples(ctx, LONG)
-    if not ctx.is_ok(_upload(ctx, v, samples, check_bad_crc=False)) or not _armed_relative(ctx, v):
-        ctx.make_safe()
+    samples = _loaded_and_armed(ctx, v, LONG)
+    if samples is None:
         return
     h = ctx.host
     try:

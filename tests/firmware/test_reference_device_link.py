@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from groundstation.core.dictionary import load_dictionary
+from conftest import wait_for as poll_until
 from groundstation.link import open_client
 from reference_device_helpers import running_reference_device
 
@@ -23,15 +24,8 @@ def dictionary():
 
 
 def wait_for(predicate, timeout: float = 15.0):
-    """Poll a condition with a bounded deadline (the condition, not the time, is tested)."""
-    import time
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        value = predicate()
-        if value:
-            return value
-        time.sleep(0.01)
-    raise AssertionError(f"condition not met within {timeout} s")
+    """The suite's bounded poll (conftest.wait_for), with room for a real-time device."""
+    return poll_until(predicate, timeout=timeout)
 
 
 def columns(blocks, packet, name):
