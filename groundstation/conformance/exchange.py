@@ -102,7 +102,10 @@ def duplicate_executed_once(ctx: Context, v: Verdict) -> None:
     h = ctx.host
     h.pause_heartbeat()            # the counters must move only by what we send here
     try:
-        base_tick = ctx.latest_tick()
+        # a heartbeat sent just before the pause is executed before this answer (one
+        # ordered stream): the counters read after it include it
+        settled = h.exchange("GET_INFO", {})
+        base_tick = max([ctx.latest_tick()] + [s.tick for s in settled.stages])
         before = ctx.housekeeping_after(base_tick)
         mark = h.mark()
         frame = h.build("ABORT", {})

@@ -101,6 +101,7 @@ class Host:
         self.token = 0
         self.lost = ""
         self._heartbeat_paused = threading.Event()
+        self._heartbeat_lock = threading.Lock()      # a pause and a heartbeat exclude
         self._send_lock = threading.Lock()
         self.udp: UdpReceiver | None = None
         if address.kind == "serial":
@@ -229,6 +230,10 @@ class Host:
         frame up to `retries` times (§6.4), then the command's own timeout."""
         name, seq, raw = frame or self.build(command, values, **build)
         ex = Exchange(name, seq, raw)
+        if name in ("CONNECT", "DISCONNECT"):
+            # a session may begin or end from here on: the new owner's telemetry can
+            # arrive before this answer does, so the break is marked before sending too
+            self.session_changed()
         mark = self.mark()
         self.send(raw)
         defaults = self.d.command_defaults
@@ -294,15 +299,22 @@ class Host:
         return list(self._arrivals.breaks)
 
     def pause_heartbeat(self, paused: bool = True) -> None:
-        if paused:
-            self._heartbeat_paused.set()
-        else:
-            self._heartbeat_paused.clear()
+        """Pause (or resume) the heartbeat.  Once a pause returns no heartbeat is sent
+        any more: the thread checks and sends under the same lock.  One sent just before
+        may still be on its way; a command exchanged after the pause has passed it (one
+        ordered stream)."""
+        with self._heartbeat_lock:
+            if paused:
+                self._heartbeat_paused.set()
+            else:
+                self._heartbeat_paused.clear()
 
     def _heartbeat(self) -> None:
         period = float(self.d.command_defaults.get("heartbeat_period_s", 0.2))
         while not self._stop.wait(period):
-            if self.token and not self._heartbeat_paused.is_set() and not self.lost:
+            with self._heartbeat_lock:
+                if not self.token or self._heartbeat_paused.is_set() or self.lost:
+                    continue
                 try:
                     self.send(self.build("HEARTBEAT", {})[2])
                 except LinkError:
