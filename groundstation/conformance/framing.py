@@ -87,26 +87,28 @@ def sequence_numbers(ctx: Context, v: Verdict) -> None:
                      f"({bad_tick} pairs differ)")
 
 
+def _tick_steps(ctx: Context, frames, packet: str) -> dict[int, int]:
+    """{tick step: count} between frames of `packet` numbered one after the other within
+    a session (a sequence gap is §2's business, not a rate)."""
+    mine = [f for f in frames if f.packet_id == ctx.ids[packet]]
+    steps: dict[int, int] = {}
+    for a, b in _within_sessions(ctx, mine):
+        if (b.sequence - a.sequence) & 0xFFFFFFFF == 1:
+            d = (b.tick - a.tick) & 0xFFFFFFFF
+            steps[d] = steps.get(d, 0) + 1
+    return steps
+
+
 def rates(ctx: Context, v: Verdict) -> None:
     """§5: HIGH_RATE every control period, HOUSEKEEPING every rate/rate_hz periods, in
     device ticks (a device may run faster than the wall clock)."""
     _enough(ctx)
     frames = ctx.host.since(0)
-    hr = [f for f in frames if f.packet_id == ctx.ids["HIGH_RATE"]]
-    per = {}
-    for a, b in _within_sessions(ctx, hr):
-        if (b.sequence - a.sequence) & 0xFFFFFFFF == 1:
-            d = (b.tick - a.tick) & 0xFFFFFFFF
-            per[d] = per.get(d, 0) + 1
+    per = _tick_steps(ctx, frames, "HIGH_RATE")
     v.expect(set(per) <= {1}, f"HIGH_RATE: tick step between consecutive frames {per} "
              f"(expected 1: one frame per period at {ctx.rate:g} Hz)")
     every = round(ctx.rate / ctx.hk.rate_hz)
-    hk = [f for f in frames if f.packet_id == ctx.ids["HOUSEKEEPING"]]
-    steps = {}
-    for a, b in _within_sessions(ctx, hk):
-        if (b.sequence - a.sequence) & 0xFFFFFFFF == 1:
-            d = (b.tick - a.tick) & 0xFFFFFFFF
-            steps[d] = steps.get(d, 0) + 1
+    steps = _tick_steps(ctx, frames, "HOUSEKEEPING")
     v.expect(bool(steps) and set(steps) <= {every}, f"HOUSEKEEPING: tick step {steps} (expected "
              f"{every} = {ctx.rate:g} / {ctx.hk.rate_hz:g} Hz)")
 

@@ -19,8 +19,12 @@ from __future__ import annotations
 
 import zlib
 
-NAMES = ("crc-range", "retry-twice", "watchdog-x2", "commit-no-crc", "profile-late",
-         "foreign-host", "shared-history")
+#: each deviation and the SPEC section whose rule it breaks (where the suite must FAIL it);
+#: the C reference device takes the same names
+BREAKS = {"crc-range": "§2.1", "retry-twice": "§6.4", "watchdog-x2": "§9.1",
+          "commit-no-crc": "§11.1", "profile-late": "§11.2", "foreign-host": "§7",
+          "shared-history": "§6.4"}
+NAMES = tuple(BREAKS)
 
 # telemetry packet ids (SPEC §1): the CRC deviation spares the command channel so the
 # suite can still open a session and see the broken frames

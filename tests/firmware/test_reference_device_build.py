@@ -9,11 +9,11 @@ import pytest
 
 from groundstation.core.dictionary import load_dictionary
 from groundstation.firmware_kit.c_export import export_c
+from groundstation.sim.deviations import NAMES
 from reference_device_helpers import (FIRMWARE_DIR, _read_line, build_reference_device,
                                       running_reference_device)
 
-DEVIATIONS = ("crc-range", "retry-twice", "watchdog-x2", "commit-no-crc", "profile-late",
-              "foreign-host", "shared-history")
+DEVIATIONS = NAMES                       # the C device takes the simulated device's names
 
 
 def test_kit_committed_is_a_fresh_export(tmp_path):
