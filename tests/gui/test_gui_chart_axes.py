@@ -9,7 +9,8 @@ import math
 import numpy as np
 import pytest
 
-from groundstation.gui.charts.autoscale import EDGE, nice_range, nice_step, sticky_range
+from groundstation.gui.charts.autoscale import (EDGE, FLAT_STEPS, least_span, nice_range, nice_step,
+                                                sticky_range)
 
 from conftest import HighRateFeeder
 
@@ -69,6 +70,52 @@ def test_autoscaled_y_range_holds_while_the_data_stay_inside(panel, dictionary):
     feed(np.arange(total, total + 40), error_angle=np.full(40, 5e-4))  # out of the range
     panel.refresh()
     assert panel.stack.plots[0].y_range()[1] >= 5e-4
+
+
+def test_a_flat_channel_gets_a_least_span_from_its_resolution():
+    # an integer channel: FLAT_STEPS of its resolution, in display units
+    assert least_span("i16", 1e-4, "A") == pytest.approx(FLAT_STEPS * 1e-4)
+    assert least_span("u8", None, "") == pytest.approx(FLAT_STEPS)
+    # a float channel: its unit's floor (ms shown as s: the floor in s)
+    assert least_span("f32", None, "rad") == pytest.approx(1e-6)
+    assert least_span("f32", None, "ms", display_scale=1e-3) == pytest.approx(1e-3)
+    assert least_span("f32", None, "furlongs") == 0.0
+    # a constant zero: a band of about the least span, not +-0.6 of the unit
+    lo, hi = nice_range(0.0, 0.0, least=1e-3)
+    assert lo < 0.0 < hi and 1e-3 <= hi - lo <= 2e-3
+    # a constant value: centred on it
+    lo, hi = nice_range(25.0, 25.0, least=0.1)
+    assert lo < 25.0 < hi and hi - lo <= 0.2
+    # one count of noise on a flat channel: the range is kept (the least span is filled)
+    shown = sticky_range(0.0, 1e-4, None, least=1e-3)
+    assert shown is not None and shown[1] - shown[0] <= 2e-3
+    assert sticky_range(0.0, 0.0, shown, least=1e-3) is None
+    assert sticky_range(-1e-4, 0.0, shown, least=1e-3) is None
+    # data wider than the least span: as before
+    assert nice_range(-1.0, 1.0, least=1e-3) == nice_range(-1.0, 1.0)
+
+
+def test_flat_channels_autoscale_to_a_readable_span(panel, dictionary):
+    """A motor current at rest (0 A, 0.1 mA per count), the angle error at 0 (f32 rad)
+    and the mode (an unscaled integer): each plot spans about FLAT_STEPS counts or its
+    unit's floor - the old rule made every flat channel +-0.6 of its unit."""
+    feed = HighRateFeeder(dictionary, panel.store)
+    panel.stack.set_layout([["HIGH_RATE.current_coarse"], ["HIGH_RATE.error_angle"],
+                            ["HIGH_RATE.mode"]])
+    panel.set_window_seconds(2.0)
+    n = 1200
+    feed(np.arange(n), current_coarse=np.zeros(n), error_angle=np.zeros(n), mode=np.zeros(n))
+    panel.refresh()
+    (clo, chi), (rlo, rhi), (mlo, mhi) = (p.y_range() for p in panel.stack.plots)
+    assert clo < 0.0 < chi and 1e-3 <= chi - clo <= 3e-3           # +- about 1 mA
+    assert rlo < 0.0 < rhi and 1e-6 <= rhi - rlo <= 3e-6           # +- about 1 urad
+    assert mlo < 0.0 < mhi and 10 <= mhi - mlo <= 30               # an integer: 10 counts
+    # the current moves by one count: still the same range
+    before = panel.stack.plots[0].y_range()
+    feed(np.arange(n, n + 40), current_coarse=np.full(40, 1e-4), error_angle=np.zeros(40),
+         mode=np.zeros(40))
+    panel.refresh()
+    assert panel.stack.plots[0].y_range() == before
 
 
 # ---------------------------------------------------------------- time axis

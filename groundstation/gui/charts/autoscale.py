@@ -24,6 +24,14 @@ STEPS = 8
 #: the view shows this fraction of the round range beyond each end, so the labels of the
 #: ticks on the round ends are drawn inside their plot, not over the neighbouring plot's
 EDGE = 0.05
+#: a flat channel's range spans at least this many steps of its resolution: a constant
+#: or one-count-noisy channel reads as flat on a short axis, not as a full-height square
+#: wave or a +-0.6 band of its unit whatever its size
+FLAT_STEPS = 10
+#: the least span for a channel the wire carries as a float (no resolution), per
+#: dictionary unit; other float units keep the old band (a tenth of the value, or 1)
+FLOAT_FLOORS = {"rad": 1e-6, "rad/s": 1e-6, "A": 1e-3, "V": 1e-3, "s": 1e-3, "ms": 1.0,
+                "degC": 0.1, "in-oz": 1e-3}
 
 
 def nice_step(size: float) -> float:
@@ -35,10 +43,23 @@ def nice_step(size: float) -> float:
     return 10.0 * power
 
 
-def nice_range(lo: float, hi: float) -> tuple[float, float]:
-    """A range around data lo..hi with a margin, its ends on multiples of a round step.
-    Depends on lo and hi only, so the same data always give the same range."""
+def least_span(wire_type: str, scale: float | None, units: str, display_scale: float = 1.0) -> float:
+    """The least y span (in display units: value x `display_scale`) for a channel of the
+    dictionary: FLAT_STEPS of its resolution (`scale` per count, or one count of an
+    unscaled integer), or its unit's FLOAT_FLOORS entry for a float; 0 when unknown."""
+    if wire_type.startswith("f"):
+        return FLOAT_FLOORS.get(units, 0.0) * display_scale
+    return FLAT_STEPS * abs(scale if scale else 1.0) * display_scale
+
+
+def nice_range(lo: float, hi: float, least: float = 0.0) -> tuple[float, float]:
+    """A range around data lo..hi with a margin, its ends on multiples of a round step,
+    spanning at least `least` (centred on the data).  Depends on its arguments only, so
+    the same data always give the same range."""
     span = hi - lo
+    if span < least:                                 # (nearly) flat: the channel's least span
+        mid = (lo + hi) / 2
+        lo, hi, span = mid - least / 2, mid + least / 2, least
     if not span > abs(hi) * 1e-12:                  # constant data: a band around them
         span = abs(lo) * 0.1 if lo else 1.0
         lo, hi = lo - span / 2, hi + span / 2
@@ -47,17 +68,18 @@ def nice_range(lo: float, hi: float) -> tuple[float, float]:
     return math.floor((lo - pad) / step) * step, math.ceil((hi + pad) / step) * step
 
 
-def sticky_range(lo: float, hi: float,
-                 shown: tuple[float, float] | None) -> tuple[float, float] | None:
+def sticky_range(lo: float, hi: float, shown: tuple[float, float] | None,
+                 least: float = 0.0) -> tuple[float, float] | None:
     """The y range for data lo..hi given the range `shown` now: None to keep it (the data
-    are inside and fill at least SHRINK_BELOW of it), else a new `nice_range`."""
+    are inside and fill at least SHRINK_BELOW of it - flat data count as `least`), else
+    a new `nice_range`."""
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return None
     if shown is not None:
         a, b = shown
-        if a <= lo and hi <= b and hi - lo >= SHRINK_BELOW * (b - a):
+        if a <= lo and hi <= b and max(hi - lo, least) >= SHRINK_BELOW * (b - a):
             return None
-    new = nice_range(lo, hi)
+    new = nice_range(lo, hi, least)
     return None if shown is not None and new == tuple(shown) else new
 
 
@@ -118,7 +140,7 @@ class ChartViewBox(pg.ViewBox):
                         math.isclose(x, v, rel_tol=1e-9, abs_tol=1e-12 * abs(chosen[1] - chosen[0]))
                         for x, v in zip(_shown(chosen), view)):
                     chosen = None          # the range was set by other means since
-                new = sticky_range(bounds[0], bounds[1], chosen)
+                new = sticky_range(bounds[0], bounds[1], chosen, bounds[2])
                 if new is not None:
                     self._round_range = new
                     self.setRange(yRange=_shown(new), padding=0.0, disableAutoRange=False)
@@ -126,22 +148,24 @@ class ChartViewBox(pg.ViewBox):
             self._autoRangeNeedsUpdate = False
             self._updatingRange = False
 
-    def _y_bounds(self) -> tuple[float, float] | None:
-        """Lowest and highest y of the visible items inside the x range shown.  Items that
-        know their window's bounds (`window_y_bounds`) answer directly; otherwise
-        pyqtgraph's general (slower) scan."""
-        lo, hi = math.inf, -math.inf
+    def _y_bounds(self) -> tuple[float, float, float] | None:
+        """Lowest and highest y of the visible items inside the x range shown, and the
+        largest least span of those that have one (`least_span`).  Items that know their
+        window's bounds (`window_y_bounds`) answer directly; otherwise pyqtgraph's
+        general (slower) scan."""
+        lo, hi, least = math.inf, -math.inf, 0.0
         for item in self.addedItems:
             if not item.isVisible():
                 continue
             get = getattr(item, "window_y_bounds", None)
             if get is None:
                 yr = self.childrenBounds(orthoRange=[None, self.state["viewRange"][0]])[1]
-                return None if yr is None else (float(yr[0]), float(yr[1]))
+                return None if yr is None else (float(yr[0]), float(yr[1]), 0.0)
             b = get()
             if b is not None:
                 lo, hi = min(lo, b[0]), max(hi, b[1])
-        return (lo, hi) if lo <= hi else None
+                least = max(least, getattr(item, "least_span", 0.0))
+        return (lo, hi, least) if lo <= hi else None
 
 
 def _shown(round_range: tuple[float, float]) -> tuple[float, float]:

@@ -198,6 +198,8 @@ class ChartCurve(pg.PlotCurveItem):
         self._poly = None                  # the points as a QPolygonF, reused frame to frame
         self._poly_xy = np.empty((0, 2))   # its memory, as numpy sees it
         self._poly_stale = True
+        #: the least y span autoscale gives this curve's channel (autoscale.least_span)
+        self.least_span = 0.0
 
     def set_points(self, x: np.ndarray, y: np.ndarray, lo: float, hi: float) -> None:
         """Draw (x, y); NaN in y breaks the line.  lo, hi: the time window shown."""
@@ -366,8 +368,9 @@ class ChartPlot(QObject):
 
     # ------------------------------------------------------------ curves, axes
     def add_curve(self, cid: str, name: str, unit: DisplayUnit, colour: int,
-                  description: str = "") -> ChartCurve:
+                  description: str = "", least_span: float = 0.0) -> ChartCurve:
         curve = ChartCurve(pg.mkPen(self.PALETTE[colour], width=1))
+        curve.least_span = least_span
         curve.setToolTip(f"{cid}: {description}" if description else cid)
         self.curves[cid] = curve
         self.units[cid] = unit

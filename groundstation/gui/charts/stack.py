@@ -18,6 +18,7 @@ from typing import TYPE_CHECKING
 from PySide6.QtCore import QObject, Signal
 from PySide6.QtWidgets import QMenu
 
+from .autoscale import least_span
 from .plot import ChartPlot
 from .channel_tree import ChannelInfo, DisplayUnit, display_unit
 
@@ -206,9 +207,13 @@ class PlotStack(QObject):
         if channel_id in plot.curves:
             return
         info = self.catalog.get(channel_id)
-        plot.add_curve(channel_id, info.name if info else channel_id,
-                       self.unit_of(channel_id), self._colour_for(channel_id),
-                       info.description if info else "")
+        unit = self.unit_of(channel_id)
+        item = info.item if info else None
+        # header counters and status bits are integer counts
+        least = (least_span(item.type, item.scale, item.units, unit.scale) if item is not None
+                 else least_span("u32", None, "", unit.scale))
+        plot.add_curve(channel_id, info.name if info else channel_id, unit,
+                       self._colour_for(channel_id), info.description if info else "", least)
 
     def _new_plot(self, index: int) -> ChartPlot:
         plot = ChartPlot(self)
