@@ -27,6 +27,9 @@ LAMP = {LinkState.UP: "#2e7d32", LinkState.CONNECTING: "#f9a825", LinkState.LOST
         LinkState.FAILED: "#c62828", LinkState.ENDED: "#c62828", LinkState.CLOSED: "#616161"}
 #: the link states the health line shows in red (ended: another station took the session)
 LINK_FAULTS = (LinkState.LOST, LinkState.FAILED, LinkState.ENDED)
+#: commands the station sends by itself, many at a time (a table read-back is one
+#: PARAM_READ per block): a completion is counted on one line, a failure has its own
+ROUTINE_COMMANDS = {"PARAM_READ": "read-backs", "GET_INFO": "device queries"}
 STATE_COLOURS = {GREEN: QColor("#2e7d32"), YELLOW: QColor("#f9a825"), RED: QColor("#c62828")}
 
 
@@ -340,6 +343,9 @@ class CommandPanel(QWidget):
         lay.addWidget(QLabel("Commands (newest first)"))
         self.stages = QListWidget()
         lay.addWidget(self.stages, 1)
+        #: routine commands' completions so far, and the one line that counts them
+        self._routine_counts: dict[str, int] = {}
+        self._routine_items: dict[str, QListWidgetItem] = {}
         session.sig_command.connect(self._stage)
         #: tests answer the confirmation dialog through this (None: ask the operator)
         self.confirm_override: bool | None = None
@@ -403,10 +409,33 @@ class CommandPanel(QWidget):
     def _stage(self, name: str, seq: str, stage: str, reason: str) -> None:
         colour = {"COMPLETED": "#2e7d32", "ACCEPTED": "#1565c0", "REJECTED": "#c62828",
                   "FAILED": "#c62828", "TIMEOUT": "#c62828", "CANCELLED": "#616161"}.get(stage, "")
-        text = f"{datetime.now():%H:%M:%S}  {name}: {stage}" + (f" ({reason})" if reason not in ("", "OK") else "")
+        now = datetime.now()
+        if name in ROUTINE_COMMANDS and stage == "COMPLETED":
+            self._routine(name, now, colour)
+            return
+        text = f"{now:%H:%M:%S}  {name}: {stage}" + (f" ({reason})" if reason not in ("", "OK") else "")
         item = QListWidgetItem(text)
         if colour:
             item.setForeground(QColor(colour))
+        self._insert(item)
+
+    def _routine(self, name: str, now: datetime, colour: str) -> None:
+        """A routine read-back that completed: counted on one line per command (a table
+        read is dozens of PARAM_READs, each a line of its own drowned what the operator
+        sent); the line moves to the top, as the newest."""
+        count = self._routine_counts.get(name, 0) + 1
+        self._routine_counts[name] = count
+        item = self._routine_items.get(name)
+        if item is None or self.stages.row(item) < 0:     # new, or scrolled off the end
+            item = self._routine_items[name] = QListWidgetItem()
+            item.setForeground(QColor(colour))
+        else:
+            self.stages.takeItem(self.stages.row(item))
+        # the line's time is the last completion's, as every line's is its command's
+        item.setText(f"{now:%H:%M:%S}  {name} ×{count} {ROUTINE_COMMANDS[name]}, last COMPLETED")
+        self._insert(item)
+
+    def _insert(self, item: QListWidgetItem) -> None:
         self.stages.insertItem(0, item)
         while self.stages.count() > 200:
             self.stages.takeItem(self.stages.count() - 1)
