@@ -38,6 +38,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from campaign_whole import print_whole, whole
 from common import machine, save
 
 from groundstation import Testbed
@@ -171,8 +172,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--profile", action="store_true", help="where the wall time goes, per phase")
+    ap.add_argument("--whole", nargs="+", metavar="CAMPAIGN", default=None,
+                    help="instead: whole campaigns (profiles/campaigns/NAME.toml or a path) as a "
+                         "user runs them, wall time split per step kind and CPU per process "
+                         "(campaign_whole.py)")
+    ap.add_argument("--analysis", action="store_true", help="--whole: with the analysis at the end")
     args = ap.parse_args()
     print(f"campaign benchmark - {machine()}, load average {os.getloadavg()[0]:.1f} at the start")
+    if args.whole:
+        return whole_campaigns(args.whole, args.rounds, args.analysis)
     ways = {"ours": (FastPacing(), "held", "process"), "inline": (FastPacing(), "held", "inline"),
             "one chunk": (ONE_CHUNK_IN_FLIGHT, "realtime", "inline")}
     runs: dict[str, list[dict]] = {k: [] for k in ways}
@@ -219,6 +227,37 @@ def main() -> None:
               f"{'0 dropped, 0 discarded' if ok else 'FRAMES LOST'}")
     print("  baseline, real-time simulator or a rig:                  1.0x real time")
     print(f"written to {save('campaign', res)}")
+
+
+def whole_campaigns(names: list[str], rounds: int, analysis: bool) -> None:
+    """Each campaign `rounds` times, interleaved, the simulator alone measured before each
+    round; the round with the median wall time is printed in full."""
+    paths = [Path(n).resolve() if Path(n).exists() else ROOT / "profiles" / "campaigns" / f"{n}.toml"
+             for n in names]
+    results: dict[str, list[dict]] = {p.stem: [] for p in paths}
+    limits = []
+    for r in range(rounds):
+        rate, _ = simulator_alone(60.0)
+        limits.append(rate)
+        for p in paths:
+            x = whole(p, analysis=analysis)
+            x["simulator_alone_x"] = rate
+            x["ratio_to_limit"] = x["device_per_wall"] / rate
+            results[p.stem].append(x)
+            print(f"  round {r + 1} {p.stem}: {x['device_per_wall']:.1f}x real time "
+                  f"({x['ratio_to_limit']:.2f} of the simulator alone, {rate:.1f}x), "
+                  f"{x['wall_s']:.2f} s wall, load {os.getloadavg()[0]:.1f}")
+    print(f"\nthe median round of each (load average now {os.getloadavg()[0]:.1f}):")
+    out: dict = {"machine": machine(), "rounds": rounds, "simulator_alone_rounds": limits}
+    for name, xs in results.items():
+        mid = sorted(xs, key=lambda x: x["wall_s"])[len(xs) // 2]
+        print_whole(mid, mid["simulator_alone_x"])
+        out[name] = {"median_device_per_wall": statistics.median(x["device_per_wall"] for x in xs),
+                     "median_ratio_to_limit": statistics.median(x["ratio_to_limit"] for x in xs),
+                     "runs": xs}
+        print(f"    median of {rounds}: {out[name]['median_device_per_wall']:.1f}x real time, "
+              f"{out[name]['median_ratio_to_limit']:.2f} of the simulator alone")
+    print(f"written to {save('campaign_whole', out)}")
 
 
 def _fmt(p: dict) -> str:

@@ -243,8 +243,14 @@ class ParameterLoader:
     """Uploads, reads back and rolls back parameter tables through a DeviceClient."""
 
     def __init__(self, client: DeviceLink, dictionary: Dictionary, history: ParameterHistory | None = None,
-                 journal: Callable[[str, dict, bytes], None] | None = None):
+                 journal: Callable[[str, dict, bytes], None] | None = None,
+                 active_table_seen: Callable[[], tuple[int, int] | None] | None = None):
         self.client = client
+        #: (version, CRC) of the active table from the HOUSEKEEPING a subscriber of this
+        #: link saw last, or None: spares waiting for the next report before an upload -
+        #: which on a simulated device held between steps (fast campaigns) never comes,
+        #: so each upload used to wait out HOUSEKEEPING_WAIT_S of wall time for it
+        self.active_table_seen = active_table_seen
         self.d = dictionary
         self.history = history if history is not None else MemoryHistory()
         #: called with ("parameter_table", record, table bytes) after each verified upload
@@ -302,8 +308,15 @@ class ParameterLoader:
         waiter = _HousekeepingWaiter(self.client, crc)
         try:
             previous = self.read_active()
-            # the new table's version follows the active one's (HOUSEKEEPING reports it)
-            version = ((waiter.wait_any(HOUSEKEEPING_WAIT_S) or 0) + 1) & 0xFFFF or 1
+            # the new table's version follows the active one's (HOUSEKEEPING reports it);
+            # a report already seen counts when it is of the table just read back (the
+            # device changes tables only on a commit, and only the session's owner commits)
+            seen = self.active_table_seen() if self.active_table_seen is not None else None
+            if seen is not None and seen[1] == previous.crc:
+                active_version = seen[0]
+            else:
+                active_version = waiter.wait_any(HOUSEKEEPING_WAIT_S)
+            version = ((active_version or 0) + 1) & 0xFFFF or 1
             self._command("PARAM_BEGIN", table_version=version, table_length=len(blob))
             for off in range(0, len(blob), self.write_block):
                 self._command("PARAM_WRITE", offset=off, data=blob[off:off + self.write_block])

@@ -347,7 +347,8 @@ class Station:
             raise ScriptError("the session is not open")
         if self.history is None:
             self.history = MemoryHistory()
-        return ParameterLoader(self.client, self.d, self.history, journal=self._journal)
+        return ParameterLoader(self.client, self.d, self.history, journal=self._journal,
+                               active_table_seen=lambda: self.state.active_table)
 
     def read_params(self, progress: Callable[[str, float], None] | None = None):
         """The device's active table (ActiveTable: bytes, CRC, values)."""
