@@ -3,12 +3,11 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
-from PySide6.QtCore import QByteArray, QSettings, Qt
-from PySide6.QtGui import QAction, QKeySequence, QShortcut
-from PySide6.QtWidgets import (QDockWidget, QFileDialog, QLabel, QMainWindow, QMessageBox,
-                               QPushButton, QToolBar)
+from PySide6.QtCore import QByteArray, QSettings, QSize, Qt, QTimer
+from PySide6.QtGui import QAction, QGuiApplication, QKeySequence, QShortcut
+from PySide6.QtWidgets import (QDockWidget, QFileDialog, QFrame, QLabel, QMainWindow, QMessageBox,
+                               QPushButton, QScrollArea, QToolBar)
 
 from ..plant.testbed import TESTBEDS_DIR
 from .analysis.panel import AnalysisPanel
@@ -20,9 +19,27 @@ from .generator.panel import GeneratorPanel
 from .panels.params import ParameterPanel
 from .panels.profile import ProfilePanel
 from .panels.logs import EventLog, ReplayBar
-from .panels.session_panels import CommandPanel, ConnectionBar, RecordingPanel, StatusPanel
+from .panels.connection import ConnectionBar, LAMP_REPLAY, lamp_style
+from .panels.session_panels import CommandPanel, RecordingPanel, StatusPanel
 from .session.session import Session
 from .charts.spectrum import SpectrumView
+
+#: why the device's controls are off in a replay (their tooltip)
+REPLAY_REASON = "a log is being replayed: nothing to command (File > Close replay, then connect)"
+#: the Device menu's actions (MainWindow.device_actions) that each source switches off
+SOURCE_OFF = {
+    "replay": ("connect", "disconnect", "arm", "disarm", "upload", "read_back", "rollback", "play",
+               "campaign"),
+    "watch": ("connect", "arm", "disarm", "upload", "read_back", "rollback", "play", "campaign"),
+}
+
+#: docks whose panel is the dock's own widget (tests and the Analysis dock's callers
+#: find it there), not in a scroll area: bounded by UNSCROLLED_MINIMUM instead, so a
+#: small screen squeezes them rather than the window growing past the screen
+UNSCROLLED_DOCKS = ("Analysis",)
+UNSCROLLED_MINIMUM = (240, 120)
+#: the window's size when no saved geometry says otherwise (made to fit the screen)
+DEFAULT_SIZE = (1600, 950)
 
 DEFAULT_LAYOUT = [["HIGH_RATE.encoder_outer", "HIGH_RATE.encoder_inner"],
                   ["HIGH_RATE.los_estimate", "HIGH_RATE.reference"],
@@ -55,10 +72,7 @@ class MainWindow(QMainWindow):
         testbeds = [str(p.relative_to(root)) if p.is_relative_to(root) else str(p)
                     for p in sorted(TESTBEDS_DIR.glob("*.toml"))]
         self.connection = ConnectionBar(self.session, testbeds)
-        bar = QToolBar("Connection")
-        bar.setObjectName("connection_bar")
-        bar.addWidget(self.connection)
-        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, bar)
+        self.addToolBar(Qt.ToolBarArea.TopToolBarArea, self.connection)
         self.replay_bar = ReplayBar(self.session)
         self.replay_toolbar = QToolBar("Replay")
         self.replay_toolbar.setObjectName("replay_bar")
@@ -108,7 +122,9 @@ class MainWindow(QMainWindow):
                                    ("Analysis", self.analysis, bottom)):
             dock = QDockWidget(name)
             dock.setObjectName(name.lower().replace(" ", "_"))
-            dock.setWidget(widget)
+            dock.setWidget(_scrolled(widget) if name not in UNSCROLLED_DOCKS else widget)
+            if name in UNSCROLLED_DOCKS:
+                widget.setMinimumSize(*UNSCROLLED_MINIMUM)      # explicit: below its layout's
             self.addDockWidget(area, dock)
             self.docks[name] = dock
         for name in ("Spectrum", "Parameters", "Generator", "Profiles", "Campaign", "Analysis"):
@@ -157,20 +173,22 @@ class MainWindow(QMainWindow):
         m.addSeparator()
         action(m, "&Quit", self.close, "Ctrl+Q")
         m = self.menuBar().addMenu("&Device")
-        action(m, "Connect to the &simulated testbed", lambda: self.session.connect_sim(
-            self.connection.testbed.currentText() or None), "F5")
-        action(m, "&Disconnect", self.session.disconnect_link, "Shift+F5")
+        # the actions a source may switch off (SOURCE_OFF): by a short name
+        self.device_actions = {
+            "connect": action(m, "Connect to the &simulated testbed", lambda: self.session.connect_sim(
+                self.connection.testbed.currentText() or None), "F5"),
+            "disconnect": action(m, "&Disconnect", self.session.disconnect_link, "Shift+F5")}
         action(m, "&ABORT", self.abort)
-        action(m, "&Arm", lambda: self.commands.send("ARM"))
-        action(m, "Dis&arm", lambda: self.commands.send("DISARM"), "Ctrl+D")
+        self.device_actions["arm"] = action(m, "&Arm", lambda: self.commands.send("ARM"))
+        self.device_actions["disarm"] = action(m, "Dis&arm", lambda: self.commands.send("DISARM"), "Ctrl+D")
         m.addSeparator()
         action(m, "&Load controller design...", self._load_design, "Ctrl+L")
-        action(m, "&Upload parameter table...", self.parameters.upload, "Ctrl+U")
-        action(m, "Read &back parameter table", self.session.params_read)
-        action(m, "Roll back parameter table...", self.parameters.rollback)
+        self.device_actions["upload"] = action(m, "&Upload parameter table...", self.parameters.upload, "Ctrl+U")
+        self.device_actions["read_back"] = action(m, "Read &back parameter table", self.session.params_read)
+        self.device_actions["rollback"] = action(m, "Roll back parameter table...", self.parameters.rollback)
         m.addSeparator()
-        action(m, "Play &profile...", self._play_profile_dialog, "Ctrl+P")
-        action(m, "Run &campaign...", self._run_campaign_dialog, "Ctrl+K")
+        self.device_actions["play"] = action(m, "Play &profile...", self._play_profile_dialog, "Ctrl+P")
+        self.device_actions["campaign"] = action(m, "Run &campaign...", self._run_campaign_dialog, "Ctrl+K")
         m = self.menuBar().addMenu("&Analysis")
         action(m, "&Analyse logs", lambda: self._show_dock("Analysis"), "Ctrl+Shift+A")
         action(m, "Add log &file...", self._analysis_files_dialog)
@@ -291,31 +309,36 @@ class MainWindow(QMainWindow):
         if path:
             self.session.open_log(path)
 
-    def _read_only(self, reason: str | None) -> None:
-        """Watch mode: every command control off with the reason as its tooltip; the
-        Abort button, Esc and the ABORT menu stay (ABORT goes straight to the device)."""
+    def _read_only(self, kind: str, reason: str | None) -> None:
+        """What the source cannot do is off, with `reason` as its tooltip (None: all on).
+        A read-only console: every command control and the panels that command (Abort,
+        Esc and the ABORT menu stay: ABORT goes straight to the device).  A replay: the
+        link's and the device's controls (the panels stay, to look at designs, profiles
+        and campaigns; their Upload, Play and Run say why they are off)."""
         self.commands.set_read_only(reason)
+        self.parameters.set_device_reason(reason)
         for w in (self.parameters, self.generator, self.profiles, self.campaign):
-            w.setEnabled(reason is None)
-            w.setToolTip(reason or "")
+            off = kind == "watch"
+            w.setEnabled(not off)
+            w.setToolTip(reason if off else "")
         self.commands.abort_button.setToolTip(
             "ABORT straight to the device (any host may send it, no session needed)"
-            if reason is not None else "")
+            if kind == "watch" else "")
+        for name, action in self.device_actions.items():
+            action.setEnabled(name not in SOURCE_OFF.get(kind, ()))
 
     def _source_changed(self, kind: str, text: str) -> None:
         from ..fanout.endpoints import read_only_message
 
-        self._read_only(read_only_message(text) if kind == "watch" else None)
-        if kind == "watch":
-            self.setWindowTitle(f"Ground station - read-only console watching {text}")
-            return
+        reason = (read_only_message(text) if kind == "watch" else REPLAY_REASON if kind == "replay"
+                  else None)
+        self._read_only(kind, reason)
         self.replay_toolbar.setVisible(kind == "replay")
+        self.setWindowTitle(f"Ground station - read-only console watching {text}" if kind == "watch"
+                            else f"Ground station - {self.connection.source.text()}" if kind != "none"
+                            else "Ground station - hybrid flexure bearing testbed")
         if kind == "replay":
-            self.setWindowTitle(f"Ground station - replay of {Path(text).name}")
-            self.connection.lamp.setStyleSheet("background:#1565c0; border-radius:7px; min-width:14px; "
-                                               "max-width:14px; min-height:14px; max-height:14px;")
-        else:
-            self.setWindowTitle("Ground station - hybrid flexure bearing testbed")
+            self.connection.lamp.setStyleSheet(lamp_style(LAMP_REPLAY))
 
     def dragEnterEvent(self, event) -> None:
         if any(u.toLocalFile().endswith(".h5") for u in event.mimeData().urls()):
@@ -331,9 +354,9 @@ class MainWindow(QMainWindow):
     def restore(self) -> None:
         geometry = self.settings.value("geometry")
         if isinstance(geometry, QByteArray):
-            self.restoreGeometry(geometry)
+            self.restoreGeometry(geometry)        # saved on another (larger) screen, maybe
         else:
-            self.resize(1600, 950)
+            self.resize(*DEFAULT_SIZE)
         state = self.settings.value("window_state")
         if isinstance(state, QByteArray):
             self.restoreState(state)
@@ -345,6 +368,44 @@ class MainWindow(QMainWindow):
                 state = None                              # damaged settings: defaults
             if isinstance(state, dict):
                 self.charts.settings.restore_state(state)
+        self.fit_to_screen()
+
+    def screen_room(self) -> QSize:
+        """The most the window may be: its screen's available area (without the task
+        bar and docks of the desktop) less the window's frame."""
+        screen = self.screen() or QGuiApplication.primaryScreen()
+        room = screen.availableGeometry().size()
+        frame = self.frameGeometry().size() - self.geometry().size()   # title bar, borders
+        return QSize(room.width() - max(frame.width(), 0), room.height() - max(frame.height(), 0))
+
+    def fit_to_screen(self) -> None:
+        """Shrink the window to its screen, and move it onto it.  Qt grows a window to
+        its contents' minimum size when a dock or a chart is added or shown (the demo
+        shows two docks): the docks scroll and the charts' area has a bounded minimum,
+        so that minimum stays inside the screen, and this takes back the growth."""
+        if self.isMaximized() or self.isFullScreen():
+            return                                # the window manager sizes it
+        room = self.screen_room()
+        size = self.size().boundedTo(room)
+        if size != self.size():
+            self.resize(size)
+        screen = self.screen() or QGuiApplication.primaryScreen()
+        area, frame = screen.availableGeometry(), self.frameGeometry()
+        if self.isVisible() and not area.contains(frame):
+            self.move(max(area.left(), min(frame.left(), area.right() - frame.width() + 1)),
+                      max(area.top(), min(frame.top(), area.bottom() - frame.height() + 1)))
+
+    def showEvent(self, event) -> None:
+        super().showEvent(event)
+        # the frame (title bar) is known once the window is on the screen
+        QTimer.singleShot(0, self.fit_to_screen)
+
+    def resizeEvent(self, event) -> None:
+        super().resizeEvent(event)
+        room = self.screen_room()
+        if event.size().width() > room.width() or event.size().height() > room.height():
+            # after the layout that grew it has finished, not inside it
+            QTimer.singleShot(0, self.fit_to_screen)
 
     def save(self) -> None:
         self.settings.setValue("geometry", self.saveGeometry())
@@ -362,3 +423,13 @@ class MainWindow(QMainWindow):
         self.analysis.shutdown()
         self.session.shutdown()
         super().closeEvent(event)
+
+
+def _scrolled(panel):
+    """A dock's panel in a scroll area: the dock may be smaller than the panel's minimum
+    (a small screen, many docks) and scrolls instead of growing the window."""
+    area = QScrollArea()
+    area.setWidget(panel)
+    area.setWidgetResizable(True)
+    area.setFrameShape(QFrame.Shape.NoFrame)
+    return area

@@ -43,7 +43,7 @@ from collections import deque
 
 import numpy as np
 from PySide6.QtCore import Qt, QTimer, Signal
-from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QFrame, QHBoxLayout, QLabel, QPushButton, QScrollArea, QVBoxLayout, QWidget
 
 from ...core.dictionary import Dictionary
 from ...live.display_buffers import TelemetryStore, insert_breaks
@@ -117,8 +117,7 @@ class StripChartPanel(QWidget):
         bar.addWidget(settings.pause_button)
         bar.addWidget(settings.autoscale_all)
         bar.addWidget(self.add_plot_button)
-        bar.addStretch(1)
-        bar.addWidget(self.info_label)
+        bar.addWidget(_room_for(self.info_label), 1)
         self.readout = QLabel(self)
         self.readout.setWordWrap(True)
         self.readout.setTextFormat(Qt.TextFormat.RichText)
@@ -379,3 +378,18 @@ class StripChartPanel(QWidget):
         if found is None or x - offset - found[0] > 1.5 / rate:
             return math.nan
         return found[1] * self.stack.unit_of(channel_id).scale
+
+
+def _room_for(label: QLabel) -> QScrollArea:
+    """The figures on the right of the bar, in whatever room is left: in a scroll area
+    without bars, so the label's width never sets the window's minimum (on a narrow
+    screen it is cut from the left; its text is for the curious)."""
+    area = QScrollArea()
+    area.setWidget(label)
+    area.setWidgetResizable(False)
+    area.setFrameShape(QFrame.Shape.NoFrame)
+    area.setAlignment(Qt.AlignmentFlag.AlignRight | Qt.AlignmentFlag.AlignVCenter)
+    for policy in (area.setHorizontalScrollBarPolicy, area.setVerticalScrollBarPolicy):
+        policy(Qt.ScrollBarPolicy.ScrollBarAlwaysOff)
+    area.setFixedHeight(label.fontMetrics().height() + 6)
+    return area

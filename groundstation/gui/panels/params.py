@@ -65,6 +65,8 @@ class ParameterPanel(QWidget):
         self._pool = QThreadPool(self)
         self._pool.setMaxThreadCount(1)
         self._busy = False                                   # a check runs on the pool
+        #: why the device's buttons are off (a replay, a read-only console), or None
+        self._device_reason: str | None = None
         self._build()
         session.sig_params_active.connect(self._on_active)
         session.sig_params_uploaded.connect(self._on_uploaded)
@@ -258,6 +260,7 @@ class ParameterPanel(QWidget):
             self._busy = False
             for b, on in zip(buttons, enabled):
                 b.setEnabled(on)
+            self._device_buttons()          # the source may have changed meanwhile
         if "error" in outcome:
             raise outcome["error"]
         return outcome["result"]
@@ -431,8 +434,23 @@ class ParameterPanel(QWidget):
         for i in range(len(COLUMNS)):
             self.tree.resizeColumnToContents(i)
         self._filling = False
-        self.rollback_button.setEnabled(self.device is not None)
-        self.upload_button.setEnabled(self.values is not None)
+        self._device_buttons()
+
+    def set_device_reason(self, reason: str | None) -> None:
+        """Upload, Read back and Roll back off with `reason` as their tooltip (a replay,
+        a read-only console: nothing to send them to); None: on when they can act."""
+        self._device_reason = reason
+        self._device_buttons()
+
+    def _device_buttons(self) -> None:
+        if self._busy:
+            return                           # a check runs: they come back after it
+        why = self._device_reason
+        self.rollback_button.setEnabled(self.device is not None and why is None)
+        self.upload_button.setEnabled(self.values is not None and why is None)
+        self.read_button.setEnabled(why is None)
+        for b in (self.upload_button, self.read_button, self.rollback_button):
+            b.setToolTip(why or "")
 
     def _add_elements(self, parent: QTreeWidgetItem, p: ParameterDef) -> None:
         """Children: one per SOS section (6 numbers) or per array element; editable."""

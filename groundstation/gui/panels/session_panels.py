@@ -1,5 +1,5 @@
-"""The operator's panels: connection bar, status and limits, commands with Abort,
-recording (the event log and the replay bar: panels/logs.py).  They show models and call
+"""The operator's panels: status and limits, commands with Abort, recording (the
+connection bar: panels/connection.py; the event log and the replay bar: panels/logs.py).  They show models and call
 Session methods; they do no I/O themselves.
 """
 
@@ -7,8 +7,6 @@ from __future__ import annotations
 
 import time
 from datetime import datetime
-from pathlib import Path
-
 from PySide6.QtCore import QSignalBlocker, QTimer, Signal
 from PySide6.QtGui import QColor, QFont
 from PySide6.QtWidgets import (QAbstractScrollArea, QCheckBox, QComboBox, QFormLayout, QGridLayout, QHBoxLayout,
@@ -16,146 +14,14 @@ from PySide6.QtWidgets import (QAbstractScrollArea, QCheckBox, QComboBox, QFormL
                                QMessageBox, QPushButton, QTableWidget,
                                QTableWidgetItem, QVBoxLayout, QWidget)
 
-from ...core.kinds import SIMULATED_DEVICE, LinkState
-from ...link import format_snapshot
 from ...live.limits import GREEN, RED, YELLOW
 from ..common.steady_label import SteadyLabel
 from ..session.session import Session
 
-#: the link lamp's colour per link state
-LAMP = {LinkState.UP: "#2e7d32", LinkState.CONNECTING: "#f9a825", LinkState.LOST: "#c62828",
-        LinkState.FAILED: "#c62828", LinkState.ENDED: "#c62828", LinkState.CLOSED: "#616161"}
-#: the link states the health line shows in red (ended: another station took the session)
-LINK_FAULTS = (LinkState.LOST, LinkState.FAILED, LinkState.ENDED)
 #: commands the station sends by itself, many at a time (a table read-back is one
 #: PARAM_READ per block): a completion is counted on one line, a failure has its own
 ROUTINE_COMMANDS = {"PARAM_READ": "read-backs", "GET_INFO": "device queries"}
 STATE_COLOURS = {GREEN: QColor("#2e7d32"), YELLOW: QColor("#f9a825"), RED: QColor("#c62828")}
-
-
-def lamp_style(colour: str) -> str:
-    return f"background:{colour}; border-radius:7px; min-width:14px; max-width:14px; min-height:14px; max-height:14px;"
-
-
-class ConnectionBar(QWidget):
-    """Source (simulated testbed, TCP/UDP address, serial port), connect, link health."""
-
-    def __init__(self, session: Session, testbeds: list[str], parent=None):
-        super().__init__(parent)
-        self.session = session
-        lay = QHBoxLayout(self)
-        lay.setContentsMargins(4, 2, 4, 2)
-        self.kind = QComboBox()
-        self.kind.addItems(["Simulated testbed", "Ethernet (tcp://host:port)", "Serial port"])
-        self.testbed = QComboBox()
-        # sized to a typical file name, not the longest one: a long variant's name
-        # (inertial_2dof_appendix_inertia.toml) must not widen the whole window
-        self.testbed.setSizeAdjustPolicy(QComboBox.SizeAdjustPolicy.AdjustToMinimumContentsLengthWithIcon)
-        self.testbed.setMinimumContentsLength(22)
-        self.testbed.currentTextChanged.connect(self.testbed.setToolTip)   # the whole name
-        self.testbed.addItems(testbeds)
-        self._show_testbed(None)                 # the simulator's default, until one is chosen
-        self.address = QLineEdit("tcp://127.0.0.1:5020")
-        self.serial = QComboBox()
-        self.serial.setEditable(True)
-        self.baud = QComboBox()
-        self.baud.setEditable(True)
-        self.baud.addItems(["2000000", "3000000", "921600", "115200"])
-        self.connect_button = QPushButton("Connect")
-        self.lamp = QLabel()
-        self.lamp.setStyleSheet(lamp_style(LAMP[LinkState.CLOSED]))
-        # The text changes twice a second: a fixed width (the usual figures fit; the
-        # tooltip has them all), so it never sets the window's minimum width and a new
-        # text does not lay the window out again.
-        self.health = SteadyLabel("not connected", width=self.fontMetrics().horizontalAdvance(
-            "12000 frames/s · dropped 000000 · CRC errors 0000 · latency 000.0 ms") + 12)
-        for w in (QLabel("Source"), self.kind, self.testbed, self.address, self.serial, self.baud,
-                  self.connect_button, self.lamp):
-            lay.addWidget(w)
-        lay.addWidget(self.health, 1)
-        self.kind.currentIndexChanged.connect(self._kind_changed)
-        self.connect_button.clicked.connect(self._toggle)
-        self._kind_changed()
-        session.sig_link_state.connect(self._link_state)
-        self._timer = QTimer(self)
-        self._timer.timeout.connect(self._update_health)
-        self._timer.start(500)
-
-    def _kind_changed(self) -> None:
-        k = self.kind.currentIndex()
-        self.testbed.setVisible(k == 0)
-        self.address.setVisible(k == 1)
-        self.serial.setVisible(k == 2)
-        self.baud.setVisible(k == 2)
-        if k == 2 and not self.serial.count():
-            from serial.tools import list_ports   # lists ports; opens nothing
-            self.serial.addItems([p.device for p in list_ports.comports()])
-
-    def _toggle(self) -> None:
-        if self.session.client is not None or self.connect_button.text() == "Disconnect":
-            self.session.disconnect_link()
-            self.connect_button.setText("Connect")
-            return
-        k = self.kind.currentIndex()
-        if k == 0:
-            self.session.connect_sim(self.testbed.currentText() or None)
-        elif k == 1:
-            self.session.connect_address(self.address.text().strip())
-        else:
-            self.session.connect_address(f"serial://{self.serial.currentText()}?baud={self.baud.currentText()}")
-        self.connect_button.setText("Disconnect")
-
-    def _show_testbed(self, path: str | None) -> None:
-        """Select the testbed the simulator runs (a script or the CLI may have chosen it),
-        so the bar never names another one."""
-        from ...plant.testbed import DEFAULT_TESTBED
-        name = Path(path).name if path else DEFAULT_TESTBED.name
-        for i in range(self.testbed.count()):
-            if Path(self.testbed.itemText(i)).name == name:
-                self.testbed.setCurrentIndex(i)
-                return
-
-    def _link_state(self, state: str, message: str) -> None:
-        if state == LinkState.CONNECTING and self.session.address == SIMULATED_DEVICE:
-            self._show_testbed(self.session.testbed)
-        self.connect_button.setText("Connect" if state == LinkState.CLOSED else "Disconnect")
-        self.lamp.setStyleSheet(lamp_style(LAMP.get(state, "#616161")))
-        self.lamp.setToolTip(f"{state}: {message}")
-        if state in LINK_FAULTS:
-            self.health.setText(f"LINK {state.upper()}: {message}")
-            self.health.setToolTip(f"LINK {state.upper()}: {message}")
-            self.health.setStyleSheet("color:#c62828; font-weight:bold;")
-        elif state == LinkState.CLOSED:
-            self.health.setText("not connected")
-            self.health.setStyleSheet("")
-
-    def _update_health(self) -> None:
-        src = self.session.source
-        if src is None or getattr(src, "link_state", "") != LinkState.UP:
-            return
-        snap = src.stats.snapshot()
-        if self.health.styleSheet():
-            self.health.setStyleSheet("")
-        self.health.setText(_compact_health(snap))
-        self.health.setToolTip(format_snapshot(snap).replace(" | ", "\n"))
-
-
-def _compact_health(snap) -> str:
-    """The link's health in a few words for the bar; the full per-packet line is the
-    tooltip.  Errors are named only when there are some, so a healthy link reads short."""
-    hr = snap.packets.get("HIGH_RATE")
-    dropped = sum(ps.dropped for name, ps in snap.packets.items() if name != "RESPONSE")
-    parts = [f"{hr.rate_hz:.0f} frames/s" if hr is not None else "no HIGH_RATE yet",
-             f"dropped {dropped}"]
-    f = snap.framing
-    crc = f.get("crc_errors", 0)
-    parts.append(f"CRC errors {crc}")
-    other = f.get("resyncs", 0) + f.get("version_errors", 0)
-    if other:
-        parts.append(f"resyncs {f.get('resyncs', 0)} · version errors {f.get('version_errors', 0)}")
-    if snap.latency_ms_mean is not None:
-        parts.append(f"latency {snap.latency_ms_mean:.1f} ms")
-    return " · ".join(parts)
 
 
 class _LimitTable(QTableWidget):

@@ -38,6 +38,7 @@ from ...logs.live import attach_recorder
 from ...logs.summary import event_markers
 from .consoles import Consoles
 from .profiles import ProfilePlayback
+from .source import device_description
 from ...live.limits import LimitMonitor
 from ...params.upload import ParameterHistory
 from ...station.recording import device_record
@@ -89,6 +90,8 @@ class Session(QObject):
         self._detach_recorder = None           # undoes attach_recorder on the current link
         self.address: str = ""
         self.testbed: str | None = None
+        #: what the connected device says it is (source.device_description), "" before
+        self.device_description = ""
         self._sim_testbed: str | None = None       # the testbed the running simulator has
         #: the simulator's pace (control periods per 1/1200 s of wall time); tests raise it
         #: to play a base-motion period in less wall time, the device's clock is unchanged
@@ -198,6 +201,7 @@ class Session(QObject):
             client.add_link_listener(lambda s, m: self._link_state_of(generation, s, m))
             client.add_command_listener(self._on_command_done)
             client.connect(take_over=True)
+            description = device_description(client)
             if self._closing or not self._want_connected or generation != self._link_generation:
                 client.close()                     # the operator gave up or went elsewhere meanwhile
                 return
@@ -208,6 +212,7 @@ class Session(QObject):
                 client.close()
                 raise
             self.client, self.station = client, station
+            self.device_description = description
             self.consoles.link_up(client, address)
             if self.recorder is not None and self.recorder.state == "recording":
                 self._detach_recorder = attach_recorder(client, self.recorder)   # a reconnect keeps recording
@@ -229,6 +234,7 @@ class Session(QObject):
         self._link_generation += 1                  # what the old link says from now on is ignored
         self._close_station()
         client, self.client = self.client, None
+        self.device_description = ""
         self.consoles.link_down()
         if client is not None:
             self._worker(client.close, "gs-disconnect")
