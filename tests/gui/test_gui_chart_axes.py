@@ -19,7 +19,9 @@ RATE = 1200.0
 
 @pytest.fixture
 def panel(strip_chart):
-    return strip_chart(30.0, (800, 500))
+    # a data area as wide as 2 s at 1200 Hz needs undecimated (the legend's column
+    # beside the plots takes 150 px of the width)
+    return strip_chart(30.0, (1000, 500))
 
 
 # ---------------------------------------------------------------- y range

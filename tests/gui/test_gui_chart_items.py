@@ -78,3 +78,27 @@ def test_curve_signals_a_listener_only_when_there_is_one(panel):
     curve.sigPlotChanged.connect(got.append)
     curve.set_points(np.arange(3.0), np.ones(3), 0.0, 5.0)
     assert got == [curve]
+
+
+def test_every_legend_sits_beside_its_plot_not_over_the_data(panel, qtbot):
+    """The legend boxes covered the traces and the axis labels: each is now in its plot's
+    layout, right of the data area, as wide in every plot (the data areas line up)."""
+    panel.stack.add_plot()
+    panel.stack.add_channel("HOUSEKEEPING.temp_flexure", 2)
+    qtbot.waitUntil(lambda: all(p.getPlotItem().getViewBox().width() > 100 for p in panel.stack.plots),
+                    timeout=5000)
+    lefts, widths = set(), set()
+    for plot in panel.stack.plots:
+        vb = plot.getPlotItem().getViewBox().sceneBoundingRect()
+        legend = plot.legend.sceneBoundingRect()
+        assert plot.legend.isVisible() and legend.height() > 0
+        # the view box's rect is half a pixel larger, right and below (pyqtgraph's)
+        assert legend.left() >= vb.right() - 1, (legend, vb)
+        axis = plot.getPlotItem().getAxis("left").sceneBoundingRect()
+        assert not legend.intersects(axis)
+        lefts.add(round(vb.left()))
+        widths.add(round(vb.width()))
+        # every entry whole inside the legend
+        for sample, label in plot.legend.items:
+            assert legend.contains(label.sceneBoundingRect().center())
+    assert len(lefts) == 1 and len(widths) == 1

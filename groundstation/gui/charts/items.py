@@ -15,7 +15,8 @@ from __future__ import annotations
 
 import pyqtgraph as pg
 from pyqtgraph.graphicsItems.LegendItem import ItemSample
-from PySide6.QtWidgets import QGraphicsWidget
+from PySide6.QtCore import Qt
+from PySide6.QtWidgets import QGraphicsWidget, QSizePolicy
 
 
 class LeanPlotItem(pg.PlotItem):
@@ -55,8 +56,38 @@ class LeanLegend(pg.LegendItem):
         self.updateSize()
 
 
-def add_lean_legend(plot: pg.PlotItem, **kwargs) -> LeanLegend:
-    """What PlotItem.addLegend does, with a LeanLegend."""
-    plot.legend = LeanLegend(**kwargs)
-    plot.legend.setParentItem(plot.vb)
-    return plot.legend
+class _PlacedLegend(LeanLegend):
+    """A legend in its plot's layout: a drag would pull it out of its cell (pyqtgraph's
+    drag re-anchors it over the view box), so it does not move."""
+
+    def mouseDragEvent(self, ev) -> None:
+        ev.ignore()
+
+
+def legend_beside(plot: pg.PlotItem, width: int | None = None, *, text_size: str = "8pt",
+                  above: bool = False) -> LeanLegend:
+    """A legend outside the data: in the plot's own layout, right of the view box (a
+    column of entries, `width` wide when given) or above it (one row of entries), so it
+    never covers a trace or a label.  PlotItem keeps its title in (0, 1), its top axis
+    in (1, 1) and the view box in (2, 1); the legend takes (2, 3) beside the data, or
+    (1, 1) between the title and the data - the top axis (never shown on our plots)
+    then leaves the layout."""
+    legend = _PlacedLegend(labelTextSize=text_size, frame=False, verSpacing=-4,
+                           size=(width, 20) if width else None)
+    plot.legend = legend
+    if above:
+        legend.setColumnCount(2)          # two entries a row: narrow plots stay narrow
+        top = plot.getAxis("top")
+        top.hide()
+        plot.layout.removeItem(top)
+        plot.layout.addItem(legend, 1, 1)
+        plot.layout.setAlignment(legend, Qt.AlignmentFlag.AlignLeft | Qt.AlignmentFlag.AlignBottom)
+    else:
+        plot.layout.addItem(legend, 2, 3)
+        plot.layout.setAlignment(legend, Qt.AlignmentFlag.AlignTop | Qt.AlignmentFlag.AlignLeft)
+    if width:
+        legend.setMinimumWidth(width)
+        legend.setMaximumWidth(width)
+    # as high as its entries: a cell as high as the plot would spread them over it
+    legend.setSizePolicy(QSizePolicy.Policy.Preferred, QSizePolicy.Policy.Fixed)
+    return legend

@@ -24,7 +24,7 @@ from PySide6.QtWidgets import QGraphicsItem, QMenu
 
 from .channel_tree import DisplayUnit, channel_ids_from_text
 from .autoscale import ChartViewBox
-from .items import LeanPlotItem, add_lean_legend
+from .items import LeanPlotItem, legend_beside
 
 
 def _cache_pixels(item: QGraphicsItem) -> None:
@@ -297,6 +297,11 @@ class ChartCurve(pg.PlotCurveItem):
         return self._bounds[ax]
 
 
+#: the legend's column right of each plot: the same for every plot of the stack, so
+#: their data areas (and times) line up; a longer name is cut (its tooltip is whole)
+LEGEND_WIDTH = 150
+
+
 class ChartPlot(QObject):
     """One plot of the stack: its curves, gap markers, cursor line and info text.
 
@@ -328,7 +333,7 @@ class ChartPlot(QObject):
         pi.getAxis("left").setWidth(80)
         for side in ("left", "bottom"):
             _cache_pixels(pi.getAxis(side))
-        self.legend = add_lean_legend(pi, offset=(4, 4), labelTextSize="8pt", brush=(0, 0, 0, 150))
+        self.legend = legend_beside(pi, LEGEND_WIDTH)
         vb = pi.getViewBox()
         vb.setAutoVisible(y=True)
         vb.disableAutoRange(axis="x")

@@ -26,6 +26,7 @@ from ...basemotion import BaseMotionProfile, preview_spectrum
 from ...core.errors import GroundStationError
 from ...instruments import spec4050 as spec
 from ...plant.testbed import PROFILES_DIR
+from ..charts.items import legend_beside
 from ..common.file_combo import select_file
 from .limits_text import limit_texts
 from .records import DEFAULT_TOLERANCE, CheckResult, UploadedProfile
@@ -39,7 +40,6 @@ BASE_MOTION_DIR = PROFILES_DIR / "base_motion"
 PENS = {"target": pg.mkPen("#ffffff", width=1.5, style=Qt.PenStyle.DashLine),
         "synth": pg.mkPen("#4e9bff", width=2), "achieved": pg.mkPen("#ffa62b", width=2),
         "volts": pg.mkPen("#8ac926", width=1), "angle": pg.mkPen("#4e9bff", width=1)}
-LEGEND_BRUSH = pg.mkBrush(0, 0, 0, 150)
 Z_TARGET, Z_SYNTH = 10, 5
 MRAD = 1e3
 MRAD2 = 1e6
@@ -160,10 +160,9 @@ class BaseMotionEditor(QObject):
             for side in ("left", "bottom"):
                 p.getAxis(side).setStyle(tickFont=font)
             p.getAxis("left").setWidth(38)
-        self.psd_legend = self.psd_plot.addLegend(offset=(2, -2), labelTextSize="7pt",
-                                                  brush=LEGEND_BRUSH)
-        self.csp_legend = self.csp_plot.addLegend(offset=(2, 2), labelTextSize="7pt",
-                                                  brush=LEGEND_BRUSH)
+        # above the data: the PSD and CSP curves fill the small plots edge to edge
+        self.psd_legend = legend_beside(self.psd_plot, text_size="7pt", above=True)
+        self.csp_legend = legend_beside(self.csp_plot, text_size="7pt", above=True)
         layout = view.ci.layout
         layout.setColumnStretchFactor(0, 3)
         layout.setColumnStretchFactor(1, 3)

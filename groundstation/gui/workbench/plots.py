@@ -25,6 +25,7 @@ import pyqtgraph as pg
 from PySide6.QtCore import QRectF, Qt
 from PySide6.QtWidgets import QSplitter, QVBoxLayout, QWidget
 
+from ..charts.items import legend_beside
 from ...params.pq import CONTOUR_LEVELS_DEG, magnitude_band_db, phase_band_deg, pq_alignment_deg
 
 DESIGN_COLOURS = ("#4e9bff", "#ffa62b")
@@ -105,7 +106,8 @@ class WorkbenchPlots(QWidget):
         for p in (self.phi, self.sik):
             p.setLabel("bottom", "frequency", units="Hz")
         self.locus.setLabel("bottom", "∠PQ (°)")
-        self.legend = self.mag.addLegend(offset=(-5, 5), labelTextSize="8pt")
+        # above the data, not over the contours it labels (the plots below keep its width)
+        self.legend = legend_beside(self.mag, above=True)
         tv = self.time_view
         self.dist_u = self._plot(tv, 0, 0, "under the input disturbance", "torque", "in-oz", log_x=False, grid=True)
         self.step_u = self._plot(tv, 0, 1, "under the reference step", "torque", "in-oz", log_x=False,
