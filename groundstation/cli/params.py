@@ -166,11 +166,8 @@ def _cmd_show(args) -> int:
             # the same account of the active table that rollback acts on
             origin = provenance(records, active.crc)
             print(f"active {origin.text()}")
-            if records:
-                r = records[-1]
-                print(f"last uploaded from here: {r.crc:08x} v{r.version} from {r.source} - "
-                      + ("the device's active table" if r.crc == active.crc else
-                         f"NOT the device's active table ({active.crc:08x})"))
+            for line in _history_lines(loader.history, active.crc):
+                print(line)
             if origin.rollback_target is not None:
                 print(f"rollback would re-activate {origin.rollback_target:08x}")
             else:
@@ -185,6 +182,29 @@ def _cmd_show(args) -> int:
     except GroundStationError as exc:
         return fail(str(exc), status_for(exc))
     return EXIT_OK
+
+
+def _history_lines(history, active_crc: int) -> list[str]:
+    """What the history holds for this device (params/upload.DeviceHistory): its last
+    upload against the active table, or that it has none - never another device's."""
+    records = history.records()
+    lines = [f"history of this device: {history.identity.text()}"]
+    if records:
+        r = records[-1]
+        lines.append(f"last uploaded from here: {r.crc:08x} v{r.version} from {r.source} - "
+                     + ("the device's active table" if r.crc == active_crc else
+                        f"NOT the device's active table ({active_crc:08x}): changed since, "
+                        f"by another station or a restart"))
+        return lines
+    others = history.other_records()
+    unnamed = sum(1 for r in others if r.identity is None)
+    devices = {r.identity for r in others if r.identity is not None}
+    lines.append("no upload from here to this device yet: nothing to compare with"
+                 + (f" (the history holds {len(others) - unnamed} upload(s) to "
+                    f"{len(devices)} other device(s), not compared)" if devices else "")
+                 + (f" ({unnamed} older upload(s) name no device and are not compared)"
+                    if unnamed else ""))
+    return lines
 
 
 _SIM_NOTE = ("note: --device sim started a new simulated testbed for this command, with its "

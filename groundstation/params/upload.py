@@ -76,7 +76,7 @@ class UploadRecord:
     crc: int
     previous_crc: int
     activated_tick: int
-    device: str = ""
+    device: str = ""                # the device's GET_INFO description
     notes: list[str] = field(default_factory=list)
     #: the upload gate (clearance.py): validated, or the override's reason and the
     #: problems it overrode.  A rollback re-activates a table the device ran before.
@@ -86,6 +86,42 @@ class UploadRecord:
     #: what the override accepted: "marginal" (a stable loop below the margin limits, the
     #: shortfalls in validation_problems), "refused" (what validation refused), "" none
     accepted_risk: str = ""
+    #: where the device was reached (DeviceIdentity.address); with `device`, which device
+    #: the table went to.  "" in records written before the history was kept per device
+    device_address: str = ""
+
+    @property
+    def identity(self) -> "DeviceIdentity | None":
+        return DeviceIdentity(self.device_address, self.device) if self.device_address else None
+
+
+@dataclass(frozen=True)
+class DeviceIdentity:
+    """Which device a table went to: where it was reached and what it says it is.
+
+    The protocol gives a device no serial number; GET_INFO's description names its
+    firmware and testbed (the simulator: its testbed file), and the address tells apart
+    two devices that describe themselves alike (two simulators of one testbed file).
+    Both must match for one device's uploads to count as another's history: a history
+    compared with the wrong device's table says "not the active table" of a table that
+    was never sent there."""
+
+    address: str
+    description: str
+
+    def text(self) -> str:
+        return f"{self.address} ({self.description})" if self.description else self.address
+
+
+def device_identity(client: DeviceLink) -> DeviceIdentity:
+    """The identity of the device at the other end of `client` (one GET_INFO)."""
+    link = getattr(client, "command_link", None)
+    peer = getattr(link, "peer", None)
+    # the peer as the socket sees it: "localhost:5020" and "127.0.0.1:5020" are one device
+    address = (f"tcp://{peer[0]}:{peer[1]}" if peer else
+               str(getattr(link, "name", "") or getattr(client, "address", "") or "device"))
+    description = str(client.command("GET_INFO").reply.get("description", "")).strip()
+    return DeviceIdentity(address, description)
 
 
 def entry_differences(dictionary: Dictionary, a: Mapping[str, Any], b: Mapping[str, Any]) -> list[str]:
@@ -177,6 +213,30 @@ class MemoryHistory:
             raise UploadError(f"no table with CRC {crc:08x} was uploaded in this run") from None
 
 
+class DeviceHistory:
+    """One device's part of a history (ParameterHistory or MemoryHistory): the records
+    of uploads to that device only, and new records stamped with its identity.  The
+    tables stay shared (content-addressed by CRC)."""
+
+    def __init__(self, store: "ParameterHistory | MemoryHistory", identity: DeviceIdentity):
+        self.store = store
+        self.identity = identity
+
+    def add(self, record: UploadRecord, blob: bytes, previous_blob: bytes) -> None:
+        record.device_address, record.device = self.identity.address, self.identity.description
+        self.store.add(record, blob, previous_blob)
+
+    def records(self) -> list[UploadRecord]:
+        return [r for r in self.store.records() if r.identity == self.identity]
+
+    def other_records(self) -> list[UploadRecord]:
+        """The store's records of other devices, and those that name none (older ones)."""
+        return [r for r in self.store.records() if r.identity != self.identity]
+
+    def table(self, crc: int) -> bytes:
+        return self.store.table(crc)
+
+
 ROLLBACK_SOURCE = "rollback"
 
 
@@ -252,13 +312,23 @@ class ParameterLoader:
         #: so each upload used to wait out HOUSEKEEPING_WAIT_S of wall time for it
         self.active_table_seen = active_table_seen
         self.d = dictionary
-        self.history = history if history is not None else MemoryHistory()
+        #: every device's uploads; `history` is the part of this loader's device
+        self.store = history if history is not None else MemoryHistory()
+        self._history: DeviceHistory | None = None
         #: called with ("parameter_table", record, table bytes) after each verified upload
         self.journal = journal
         self.last_uploaded: UploadRecord | None = None
         self.write_block = dictionary.max_payload - 10  # token, opcode, offset
         count = next(i for i in dictionary.command("PARAM_READ").args if i.name == "count")
         self.read_block = int(count.value_range[1]) if count.value_range else 512
+
+    @property
+    def history(self) -> DeviceHistory:
+        """The uploads to this loader's device (asked for its identity once, when first
+        needed: a loader that only reads the table sends no GET_INFO)."""
+        if self._history is None:
+            self._history = DeviceHistory(self.store, device_identity(self.client))
+        return self._history
 
     # ------------------------------------------------------------------ reading
     def read_active(self, progress: Callable[[str, float], None] | None = None) -> ActiveTable:
@@ -305,6 +375,9 @@ class ParameterLoader:
                      progress: Callable[[str, float], None] | None,
                      gate: Mapping[str, Any] | None = None) -> UploadRecord:
         crc = ptable.table_crc(blob)
+        # who the device is, asked before anything is sent: a verified upload must not
+        # miss its history record because the question failed afterwards
+        history = self.history
         waiter = _HousekeepingWaiter(self.client, crc)
         try:
             previous = self.read_active()
@@ -340,15 +413,14 @@ class ParameterLoader:
         finally:
             waiter.close()
         record = UploadRecord(time=time.time(), source=source, version=version, crc=crc,
-                              previous_crc=previous.crc, activated_tick=int(reply["tick"]),
-                              device=str(self.client.device_info.get("description", "")))
+                              previous_crc=previous.crc, activated_tick=int(reply["tick"]))
         if gate is not None:
             record.validated = bool(gate["validated"])
             record.override_reason = str(gate["override_reason"])
             record.validation_problems = list(gate["validation_problems"])
             record.accepted_risk = str(gate.get("accepted_risk", ""))
         self.last_uploaded = record
-        self.history.add(record, blob, previous.blob)
+        history.add(record, blob, previous.blob)
         if self.journal is not None:
             self.journal("parameter_table", asdict(record), blob)
         return record
