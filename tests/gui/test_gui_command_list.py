@@ -38,6 +38,12 @@ def test_routine_read_backs_fold_into_one_counting_line(panel):
     assert lines(panel) == ["PARAM_READ ×38 read-backs, last COMPLETED", "ARM: REJECTED (NOT_IDLE)",
                             "PARAM_READ: TIMEOUT (no answer)", "SET_MODE: COMPLETED"]
     assert panel.stages.count() == 4
+    # an upload's block writes fold too, each command on its own counting line
+    for seq in range(3):
+        emit("PROFILE_WRITE", str(70 + seq), "COMPLETED", "OK")
+    emit("PROFILE_COMMIT", "80", "COMPLETED", "OK")
+    assert lines(panel)[:3] == ["PROFILE_COMMIT: COMPLETED", "PROFILE_WRITE ×3 blocks written, last COMPLETED",
+                                "PARAM_READ ×38 read-backs, last COMPLETED"]
 
 
 def test_the_counting_line_comes_back_after_it_scrolled_off(panel):

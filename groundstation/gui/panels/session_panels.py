@@ -19,8 +19,10 @@ from ..common.steady_label import SteadyLabel
 from ..session.session import Session
 
 #: commands the station sends by itself, many at a time (a table read-back is one
-#: PARAM_READ per block): a completion is counted on one line, a failure has its own
-ROUTINE_COMMANDS = {"PARAM_READ": "read-backs", "GET_INFO": "device queries"}
+#: PARAM_READ per block, an upload one WRITE per block): a completion is counted on one
+#: line, a failure has its own (the upload's BEGIN and COMMIT keep theirs)
+ROUTINE_COMMANDS = {"PARAM_READ": "read-backs", "PARAM_WRITE": "blocks written",
+                    "PROFILE_WRITE": "blocks written", "GET_INFO": "device queries"}
 STATE_COLOURS = {GREEN: QColor("#2e7d32"), YELLOW: QColor("#f9a825"), RED: QColor("#c62828")}
 
 
