@@ -5,7 +5,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed-stamp
 
-.PHONY: run test test-stressed bench setup clean firmware
+.PHONY: run test test-stressed bench setup clean firmware screenshots
 
 setup: $(STAMP)
 
@@ -41,6 +41,18 @@ test-stressed: $(STAMP)
 
 bench: $(STAMP)
 	QT_QPA_PLATFORM=offscreen $(PY) benchmarks/run_all.py
+
+# the window in each source, to docs/screenshots/ (tools/screenshots.py), on a virtual X
+# server: xvfb installed when missing and root, as tools/system-deps.sh installs packages
+screenshots: $(STAMP)
+	@command -v xvfb-run >/dev/null 2>&1 || { \
+	  if [ "$$(id -u)" != "0" ]; then \
+	    echo "screenshots: xvfb-run missing: run 'sudo apt-get install xvfb xauth'" >&2; exit 1; fi; \
+	  echo "screenshots: installing xvfb xauth"; \
+	  export DEBIAN_FRONTEND=noninteractive; \
+	  apt-get update -qq >/dev/null || echo "screenshots: apt-get update failed, trying the install anyway" >&2; \
+	  apt-get install -y -qq --no-install-recommends xvfb xauth >/dev/null; }
+	xvfb-run -a -s "-screen 0 1920x1080x24" $(PY) tools/screenshots.py
 
 clean:
 	rm -rf $(VENV) .pytest_cache .hypothesis build *.egg-info

@@ -38,6 +38,8 @@ SOURCE_OFF = {
 #: small screen squeezes them rather than the window growing past the screen
 UNSCROLLED_DOCKS = ("Analysis",)
 UNSCROLLED_MINIMUM = (240, 120)
+#: the bottom docks' height at first (the window's default size leaves the charts 500 px)
+BOTTOM_DOCK_HEIGHT = 260
 #: the window's size when no saved geometry says otherwise (made to fit the screen)
 DEFAULT_SIZE = (1600, 950)
 
@@ -134,6 +136,11 @@ class MainWindow(QMainWindow):
         self.status_panel.refresh()
         self.resizeDocks([self.docks["Status and limits"]],
                          [min(self.status_panel.preferred_width(), 480)], Qt.Orientation.Horizontal)
+        # the docks scroll, so their panels no longer size them: the charts get the most
+        # height, the command list room for a few lines
+        self.resizeDocks([self.docks["Events"]], [BOTTOM_DOCK_HEIGHT], Qt.Orientation.Vertical)
+        self.resizeDocks([self.docks["Commands"], self.docks["Status and limits"]], [2, 3],
+                         Qt.Orientation.Vertical)
 
     def _status_line(self) -> None:
         """The link's state in the status bar; the window follows the data's source."""

@@ -24,7 +24,7 @@ LAMP = {LinkState.UP: "#2e7d32", LinkState.CONNECTING: "#f9a825", LinkState.LOST
         LinkState.FAILED: "#c62828", LinkState.ENDED: "#c62828", LinkState.CLOSED: "#616161"}
 #: the link states the health line shows in red (ended: another station took the session)
 #: the most the source's words take in the bar (pixels; longer ones are elided)
-SOURCE_WIDTH = 520
+SOURCE_WIDTH = 640
 #: the lamp's colour while a log is replayed (no link)
 LAMP_REPLAY = "#1565c0"
 LINK_FAULTS = (LinkState.LOST, LinkState.FAILED, LinkState.ENDED)
