@@ -41,6 +41,7 @@ from ..link.intake import TelemetryIntake
 from ..link.stats import LinkStatistics
 from . import schema, wire
 from .abort import send_abort
+from .handshake import HandshakeWatch
 from .endpoints import FanoutError, ReadOnlyConsole, parse_endpoint, read_only_message
 
 log = logging.getLogger(__name__)
@@ -106,8 +107,12 @@ class WatchClient(TelemetryOutlet):
         self._bad_in_a_row = 0
         #: why the reader thread stopped on its own (None while it runs or stopped as asked)
         self.failure: str | None = None
-        #: set at the first hello and when the reader ends: wait_up waits on it
+        #: set at the first hello, at a failed handshake and when the reader ends:
+        #: wait_up waits on it
         self._wake = threading.Event()
+        #: this console's ZeroMQ handshakes with the publisher (handshake.py): why it
+        #: hears nothing when a station is there (keys required, key refused ...)
+        self.handshake: HandshakeWatch | None = None
 
     # ------------------------------------------------------------------ contract
     def add_command_listener(self, callback: Callable[[CommandResult], None]) -> None:
@@ -160,8 +165,12 @@ class WatchClient(TelemetryOutlet):
                 from .keys import secure_viewer
                 secure_viewer(sock, self.curve_keys, self.key_name)
             sock.subscribe(b"")
+            # before connect: the first handshake is the one a mismatch fails
+            self.handshake = HandshakeWatch(sock, self.endpoint, self.curve_keys, self.key_name)
             sock.connect(self.endpoint)
         except BaseException:
+            if self.handshake is not None:
+                self.handshake.close()
             sock.close(linger=0)
             ctx.term()
             raise
@@ -181,6 +190,8 @@ class WatchClient(TelemetryOutlet):
         self._wake.wait(timeout)
         if self.failure is not None:
             raise FanoutError(f"stopped watching {self.endpoint}: {self.failure}")
+        if not self.hello and self.problem:
+            raise FanoutError(self.problem)
         if not self.hello:
             keys = (" with these CURVE keys (is this console's public key in the "
                     "publisher's authorized/ folder?)" if self.curve_keys else "")
@@ -193,32 +204,55 @@ class WatchClient(TelemetryOutlet):
                               f"--publish {self.endpoint}")
         return self
 
+    @property
+    def problem(self) -> str:
+        """Why the handshakes with the publisher fail, "" when they do not."""
+        return self.handshake.problem if self.handshake is not None else ""
+
     def _read(self, ctx, sock) -> None:
         import zmq
 
+        poller = zmq.Poller()
+        poller.register(sock, zmq.POLLIN)
+        poller.register(self.handshake.monitor, zmq.POLLIN)
         try:
             while not self._stop.is_set():
-                if sock.poll(100, zmq.POLLIN):
+                ready = dict(poller.poll(100))
+                if ready.get(sock):
                     for _ in range(DRAIN_BATCH):     # what is queued, a bounded number
                         try:
                             parts = sock.recv_multipart(zmq.NOBLOCK)
                         except zmq.Again:
                             break
                         self._on_parts(parts)
+                if ready.get(self.handshake.monitor) and self.handshake.drain():
+                    self._on_handshake()
                 self._watchdog()
         except BaseException as exc:     # noqa: BLE001 - the watch must never end silently
             self._fail(exc)
         finally:
+            self.handshake.close()
             sock.close(linger=0)
             ctx.term()
             self._wake.set()
+
+    def _on_handshake(self) -> None:
+        """A new handshake failure (or the first success after one): said once, not at
+        each of ZeroMQ's reconnects; wait_up need not wait out its timeout for it."""
+        if self.problem:
+            log.warning("watching %s: %s", self.endpoint, self.problem)
+            if self.handshake.certain:
+                self._wake.set()
+            if self.link_state != LinkState.UP:
+                self._set_state(self.link_state, self.problem)
 
     def _watchdog(self) -> None:
         """'lost' when nothing valid arrived for silence_s (whatever else did)."""
         if self.link_state == LinkState.UP and time.monotonic() - self._last_valid > self.silence_s:
             bad = f" ({self._bad_in_a_row} refused meanwhile)" if self._bad_in_a_row else ""
+            why = f": {self.problem}" if self.problem else ""
             self._set_state(LinkState.LOST, f"nothing valid from the publisher at {self.endpoint} for "
-                                    f"{self.silence_s:g} s{bad} - still listening")
+                                    f"{self.silence_s:g} s{bad} - still listening{why}")
 
     def _fail(self, exc: BaseException) -> None:
         """The reader thread stops on an error nothing foresaw: said, never silent."""
