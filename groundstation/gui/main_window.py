@@ -9,6 +9,7 @@ from PySide6.QtGui import QAction, QGuiApplication, QKeySequence, QShortcut
 from PySide6.QtWidgets import (QDockWidget, QFileDialog, QFrame, QLabel, QMainWindow, QMessageBox,
                                QPushButton, QScrollArea, QToolBar)
 
+from ..core.kinds import LinkState
 from ..plant.testbed import TESTBEDS_DIR
 from .analysis.panel import AnalysisPanel
 from .panels.campaign import CampaignPanel
@@ -19,7 +20,7 @@ from .generator.panel import GeneratorPanel
 from .panels.params import ParameterPanel
 from .panels.profile import ProfilePanel
 from .panels.logs import EventLog, ReplayBar
-from .panels.connection import ConnectionBar, LAMP_REPLAY, lamp_style
+from .panels.connection import LAMP, LAMP_REPLAY, ConnectionBar, lamp_style
 from .panels.session_panels import CommandPanel, RecordingPanel, StatusPanel
 from .session.session import Session
 from .charts.spectrum import SpectrumView
@@ -346,6 +347,8 @@ class MainWindow(QMainWindow):
                             else "Ground station - hybrid flexure bearing testbed")
         if kind == "replay":
             self.connection.lamp.setStyleSheet(lamp_style(LAMP_REPLAY))
+        elif kind == "none":
+            self.connection.lamp.setStyleSheet(lamp_style(LAMP[LinkState.CLOSED]))
 
     def dragEnterEvent(self, event) -> None:
         if any(u.toLocalFile().endswith(".h5") for u in event.mimeData().urls()):

@@ -100,6 +100,7 @@ def test_a_rig_shows_its_address_and_description_and_no_demo(qtbot, window, dict
         assert all(w.isEnabled() for w in command_controls(window))
         assert enabled_actions(window) == set(window.device_actions)
         window.session.disconnect_link()
+        assert bar.source.text() == "Not connected"        # not the rig any more
     finally:
         dev.stop()
 
@@ -146,4 +147,11 @@ def test_a_read_only_console_has_nothing_that_commands(qtbot, window):
     assert not window.demo_action.isVisible()
     # only leaving the console (Disconnect) stays in the Device menu; ABORT is not in it
     assert enabled_actions(window) == {"disconnect"}
+    # leaving the console (Device > Disconnect): the choosers and the controls are back
     window.session.disconnect_link()
+    assert bar.source.text() == "Not connected"
+    assert choosers_shown(window) and "read-only" not in window.windowTitle()
+    assert all(w.isEnabled() for w in command_controls(window))
+    assert all(panel.isEnabled() for panel in (window.parameters, window.generator, window.profiles,
+                                               window.campaign))
+    assert enabled_actions(window) == set(window.device_actions)

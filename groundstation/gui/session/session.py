@@ -239,6 +239,7 @@ class Session(QObject):
         if client is not None:
             self._worker(client.close, "gs-disconnect")
             self.sig_link_state.emit(LinkState.CLOSED, "")
+            self.sig_source.emit("none", "")       # a rig or a watched station no longer
         if self.sim is not None and self.address != SIMULATED_DEVICE:
             self.generator.forget_simulator()
             self.sim.stop()
