@@ -6,6 +6,7 @@ shrunk back whenever a dock or a chart grows it."""
 
 from __future__ import annotations
 
+import pytest
 from PySide6.QtCore import QRect
 
 
@@ -23,7 +24,8 @@ def test_the_window_starts_inside_a_small_screen(qtbot, gui_window):
     win = gui_window(10.0)
     qtbot.waitExposed(win)
     area = win.screen().availableGeometry()
-    assert area.width() < 1600 or area.height() < 950     # the default size would not fit
+    if area.width() >= 1600 and area.height() >= 950:    # QT_QPA_PLATFORM=xcb on a big screen
+        pytest.skip("the default size fits this screen: nothing to take back")
     # once shown (its frame is known then)
     qtbot.waitUntil(lambda: inside_the_screen(win), timeout=5000)
     assert area.contains(win.frameGeometry())
