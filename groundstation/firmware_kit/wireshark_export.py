@@ -10,7 +10,9 @@ opcode names are value strings; status bits are boolean sub-fields.
 
 The dissector registers on one UDP and one TCP port (default: the simulator's 5020 for
 both - the device sends its telemetry from its command port's number, SPEC.md 1.1);
-preferences under Protocols > HFB change them.  The text is a pure function of the
+preferences under Protocols > HFB change them.  On every other port heuristic
+dissectors recognise the protocol by a whole frame with a good CRC and claim its
+conversation (wireshark_lua.py; the preference `hfb.heuristics` turns them off).  The text is a pure function of the
 dictionary and the port.
 """
 
@@ -199,6 +201,8 @@ def _preamble(d: Dictionary, port: int) -> list[str]:
         "-- scaled items show engineering units, their wire counts are <field>.raw.",
         f"-- UDP telemetry and the TCP command channel are decoded on port {port} (the device's",
         "-- command port, and the UDP port its telemetry comes from); preferences change both.",
+        "-- On any other port a conversation is recognised by its first whole frame with a good",
+        "-- CRC (hfb.heuristics, on by default; docs/firmware.md).",
         "",
         f"local hfb = Proto(\"hfb\", {lua_str(f'HFB testbed protocol ({d.name} {d.version})')})",
         f"local PROTOCOL_MAJOR = {d.version_major}",
@@ -208,6 +212,9 @@ def _preamble(d: Dictionary, port: int) -> list[str]:
         "\"UDP port the device sends telemetry from (its command port's number)\")",
         f"hfb.prefs.tcp_port = Pref.uint(\"TCP command port\", {port}, "
         "\"TCP port of the device's command channel\")",
+        # a switch of our own: tshark's --disable-heuristic runs before Lua scripts load
+        "hfb.prefs.heuristics = Pref.bool(\"Find the protocol on any port\", true, "
+        "\"Recognise HFB frames on other UDP and TCP ports by their header and CRC\")",
         "",
         f"local PACKET_NAMES = {value_table({p.name: p.id for p in d.packets})}",
         f"local OPCODE_NAMES = {value_table({c.name: c.opcode for c in d.commands})}",

@@ -254,4 +254,29 @@ UDP_PROTO.dissector = dissect_datagram
 TCP_PROTO.dissector = dissect_stream
 hfb.prefs_changed = register
 register()
+
+-- ---------------------------------------------------------------- any other port
+-- a device on another port is found by its first whole frame: sync word, version,
+-- known packet id, a length its packet allows, and a good CRC (a false match of all of
+-- them in other traffic is below one in 2^50).  The frame's conversation (both
+-- addresses and ports) is then claimed, so that the rest of it - a damaged frame, a
+-- frame split over TCP segments - is decoded as on the preference's port.
+local function first_frame_good(tvb)
+  local n = tvb:len()
+  local total = check_frame(tvb, 0, n)
+  if not total or total > n then return false end
+  return crc32(tvb, 0, total - CRC_SIZE) == tvb(total - CRC_SIZE, CRC_SIZE):le_uint()
+end
+
+local function heuristic(proto, walk)
+  return function(tvb, pinfo, tree)
+    if not hfb.prefs.heuristics or not first_frame_good(tvb) then return false end
+    pinfo.conversation = proto
+    walk(tvb, pinfo, tree)
+    return true
+  end
+end
+
+UDP_PROTO:register_heuristic("udp", heuristic(UDP_PROTO, dissect_datagram))
+TCP_PROTO:register_heuristic("tcp", heuristic(TCP_PROTO, dissect_stream))
 """

@@ -9,7 +9,8 @@ record headers, Ethernet/IPv4/UDP/TCP around the frames):
   counts, flags and states exactly);
 * the TCP command channel: the simulated firmware's answers to real commands, frames
   split across segments and several in one, with arguments and replies decoded;
-* the ports are preferences.
+* the ports are preferences;
+* on any other port heuristics find the protocol by a whole frame with a good CRC.
 """
 
 from __future__ import annotations
@@ -337,11 +338,15 @@ def test_the_command_channel_is_reassembled_and_decoded(capture, dictionary, tra
     assert [int(v, 0) for lay in flagged for v in lay["hfb.cmd.connect.dictionary_hash"]] == [dictionary.hash ^ 1]
 
 
+NO_HEURISTICS = ("-o", "hfb.heuristics:FALSE")
+
+
 def test_the_ports_are_preferences(capture, dictionary):
     pcap, lua = capture["dir"] / "port7020.pcap", capture["lua"]
-    assert run_tshark(pcap, lua, ["hfb.packet_id"], "-Y", "hfb") == []       # default: 5020
+    # without the heuristics only the preference's port is decoded (default: 5020) ...
+    assert run_tshark(pcap, lua, ["hfb.packet_id"], *NO_HEURISTICS, "-Y", "hfb") == []
     layers = run_tshark(pcap, lua, ["hfb.packet_id"], "-o", "hfb.udp_port:7020",
-                        "-o", "hfb.tcp_port:7020", "-Y", "hfb")
+                        "-o", "hfb.tcp_port:7020", *NO_HEURISTICS, "-Y", "hfb")
     ids = {int(v, 0) for lay in layers for v in lay["hfb.packet_id"]}
     assert ids == {p.id for p in dictionary.packets}
 
@@ -355,3 +360,44 @@ def test_the_dissector_is_generated_deterministically(tmp_path, dictionary):
     assert text == render_lua(dictionary, 6000).encode() == render_lua(dictionary, 6000).encode()
     assert b'Pref.uint("UDP telemetry port", 6000' in text
     assert f"DICTIONARY_HASH = 0x{dictionary.hash:08X}".encode() in text
+
+
+
+def _frames_shown(pcap: Path, lua: Path, transport: str) -> dict[int, tuple]:
+    """capture frame number -> (sequences, CRC verdicts, junk) of the HFB frames in it."""
+    fields = ["frame.number", "hfb.sequence", "hfb.crc.good", "hfb.junk"]
+    return {int(lay["frame.number"][0]): tuple(tuple(lay.get(f, ())) for f in fields[1:])
+            for lay in run_tshark(pcap, lua, fields, "-Y", f"{transport} && hfb")}
+
+
+def test_any_other_port_is_found_by_the_heuristics(capture, dictionary):
+    """The dissector exported for 5020 decodes a device on 7020 with no preference set:
+    UDP from the first datagram, the bad-CRC frame too (the conversation is claimed);
+    TCP from the first segment that starts with a whole good frame, then as on 5020
+    (reassembly, junk, a damaged frame)."""
+    lua = capture["lua"]
+    on_port = {t: _frames_shown(capture["dir"] / "port5020.pcap", lua, t) for t in ("udp", "tcp")}
+    found = {t: _frames_shown(capture["dir"] / "port7020.pcap", lua, t) for t in ("udp", "tcp")}
+    assert found["udp"] == on_port["udp"]
+    assert [v for f in found["udp"].values() for v in f[1]].count("0") == 1      # the damaged frame
+    # the stream's first frames are split inside their headers (no whole frame to
+    # recognise): the first segment holding one is frame 14, a command
+    first = min(found["tcp"])
+    assert first == 14 and found["tcp"][first] == on_port["tcp"][first]
+    later = {n: v for n, v in on_port["tcp"].items() if n > 15}       # 15 ends a frame begun in 13
+    assert {n: v for n, v in found["tcp"].items() if n > 15} == later
+    assert any(len(v[0]) > 1 for v in later.values())                 # frames over segments
+    assert later[max(later)][1] == ("1",) and later[max(later) - 1][1] == ("0",)
+
+
+def test_the_heuristics_want_a_good_crc(capture, tmp_path):
+    """A datagram on another port that has the frame's header but not its CRC is not
+    taken for the protocol (nor is one whose version differs)."""
+    bad = capture["bad"]
+    other_version = bytearray(capture["datagrams"][0])
+    other_version[2] ^= 0x40
+    write_pcap(tmp_path / "lookalike.pcap", [udp_packet(7021, HOST_UDP, bad),
+                                             udp_packet(7022, HOST_UDP, bytes(other_version))])
+    assert run_tshark(tmp_path / "lookalike.pcap", capture["lua"], ["hfb.packet_id"], "-Y", "hfb") == []
+    write_pcap(tmp_path / "good.pcap", [udp_packet(7021, HOST_UDP, capture["datagrams"][0])])
+    assert run_tshark(tmp_path / "good.pcap", capture["lua"], ["hfb.packet_id"], "-Y", "hfb") != []
