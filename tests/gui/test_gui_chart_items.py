@@ -102,3 +102,10 @@ def test_every_legend_sits_beside_its_plot_not_over_the_data(panel, qtbot):
         for sample, label in plot.legend.items:
             assert legend.contains(label.sceneBoundingRect().center())
     assert len(lefts) == 1 and len(widths) == 1
+    # the decimation and gap notes too: under the legend, not over the newest samples
+    plot = panel.stack.plots[0]
+    plot.show_decimation(4)
+    vb = plot.getPlotItem().getViewBox().sceneBoundingRect()
+    note = plot.info.sceneBoundingRect()
+    assert "decimated ×4" in plot.info_text() and note.width() > 0
+    assert note.left() >= vb.right() - 1 and note.top() >= plot.legend.sceneBoundingRect().bottom()

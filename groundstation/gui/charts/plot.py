@@ -340,8 +340,11 @@ class ChartPlot(QObject):
         self.curves: dict[str, ChartCurve] = {}
         self.units: dict[str, DisplayUnit] = {}
         self._names: dict[str, str] = {}
-        self.info = pg.TextItem(anchor=(1, 0), color=(235, 235, 235), fill=(0, 0, 0, 140))
-        self.info.setParentItem(vb)
+        # the decimation and gap notes under the legend, in its column: over the data
+        # they hid the newest samples' corner, as the legend did
+        self.info = pg.TextItem(anchor=(0, 1), color=(235, 235, 235))
+        self.info.setParentItem(pi)
+        self.info.setTextWidth(LEGEND_WIDTH - 4)
         self.info.hide()
         _cache_pixels(self.info)
         vb.sigResized.connect(self._place_info)
@@ -486,15 +489,16 @@ class ChartPlot(QObject):
 
     def _update_info(self) -> None:
         parts = [p for p in (self._dec_text, self._gap_text) if p]
-        html = " · ".join(parts)
+        html = "<br>".join(parts)                    # one note a line in the narrow column
         if html != self._info_html:
             self._info_html = html
-            self.info.setHtml(f"<span style='font-size:8pt'>{html}</span>")
+            self.info.setHtml(f"<span style='font-size:7pt; color:#b0b0b0'>{html}</span>")
             self.info.setVisible(bool(parts))
             self._place_info()
 
     def _place_info(self) -> None:
-        self.info.setPos(self.getPlotItem().getViewBox().width() - 4, 2)
+        box = self.getPlotItem().getViewBox().geometry()       # in the plot item's coordinates
+        self.info.setPos(box.right() + 2, box.bottom())
 
     # ------------------------------------------------------------ cursor, mouse, drops
     def set_cursor(self, x: float | None) -> None:
