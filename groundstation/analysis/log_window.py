@@ -27,6 +27,7 @@ import numpy as np
 from ..logs import LogReader
 from ..plant.testbed import Testbed, TestbedConfigError, load_testbed
 from . import AnalysisError
+from .testbed_figures import log_testbed, no_testbed
 
 PACKET = "HIGH_RATE"
 #: the channels a missing-channel message lists when the log has them: the frequency
@@ -100,10 +101,9 @@ def testbed_info(reader: LogReader, testbed: str | Path | Testbed | None) -> Tes
     if testbed is not None:
         tb = testbed if isinstance(testbed, Testbed) else load_testbed(testbed)
         return TestbedInfo(tb, tomllib.loads(tb.text), f"testbed file {tb.path}")
-    name, where, text = reader.testbed()
+    name, where, text, label = log_testbed(reader)
     if not text:
-        return TestbedInfo(None, {}, "", "the log records no testbed file: choose one")
-    label = f"the log's testbed '{name}'" if name else "the log's testbed"
+        return TestbedInfo(None, {}, "", f"{no_testbed(reader)}: choose one")
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -1,5 +1,7 @@
 """The testbed constants the log metrics need - the autocollimator's calibrated range,
-the motor resistances, the set-up - from a testbed file or from the one a log recorded.
+the motor resistances, the set-up - from a testbed file or from the one a log recorded:
+its testbed file (--testbed at recording), else the one the device named at connect
+(logs/device_testbed.py; a log recorded from a tcp:// device without --testbed).
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..logs import LogReader
+from ..logs.device_testbed import recorded_device
 from ..plant.testbed import Testbed, TestbedConfigError, load_testbed
 from . import AnalysisError
 
@@ -27,6 +30,8 @@ class TestbedFigures:
     resistance_coarse_ohm: float | None
     resistance_fine_ohm: float | None
     setup: str = ""                              # "relative" | "inertial" | '' unknown
+    #: why there is no testbed, when `source` is '' (what the device said, if it did)
+    missing: str = "the log records no testbed file"
 
     @classmethod
     def of(cls, tb: Testbed, source: str) -> "TestbedFigures":
@@ -41,6 +46,30 @@ def _number(doc: dict, section: str, key: str) -> float | None:
     return float(v)
 
 
+def log_testbed(reader: LogReader) -> tuple[str, str, str, str]:
+    """(name, path, text, label) of the testbed a log recorded: its testbed file, else
+    the file the device named at connect; all '' when neither."""
+    name, where, text = reader.testbed()
+    if text:
+        return name, where, text, f"the log's testbed '{name}'" if name else "the log's testbed"
+    device = recorded_device(reader) or {}
+    text = device.get("testbed_text")
+    if isinstance(text, str) and text:
+        name = str(device.get("testbed_name", ""))
+        return (name, str(device.get("testbed_file", "")), text,
+                f"the testbed '{name}' the device named at connect")
+    return "", "", "", ""
+
+
+def no_testbed(reader: LogReader) -> str:
+    """Why a log has no testbed, in words: and what its device said it was, if it did."""
+    device = recorded_device(reader)
+    if device is None:
+        return "the log records no testbed file"
+    return (f"the log records no testbed file, and its device described itself at connect "
+            f"as \"{device['description']}\", naming no testbed file known here")
+
+
 def figures_from_testbed(reader: LogReader, testbed: str | Path | Testbed | None = None) -> TestbedFigures:
     """From `testbed` (a file or a loaded Testbed) if given, else from the log: the
     recorded file itself when it is still where it was and unchanged (then checked in
@@ -48,10 +77,9 @@ def figures_from_testbed(reader: LogReader, testbed: str | Path | Testbed | None
     if testbed is not None:
         tb = testbed if isinstance(testbed, Testbed) else load_testbed(testbed)
         return TestbedFigures.of(tb, f"testbed file {tb.path}")
-    name, where, text = reader.testbed()
+    name, where, text, label = log_testbed(reader)
     if not text:
-        return TestbedFigures("", None, None, None)
-    label = f"the log's testbed '{name}'" if name else "the log's testbed"
+        return TestbedFigures("", None, None, None, missing=no_testbed(reader))
     if where and Path(where).is_file():
         try:
             tb = load_testbed(where)
@@ -71,4 +99,4 @@ def figures_from_testbed(reader: LogReader, testbed: str | Path | Testbed | None
                           str(doc.get("testbed", {}).get("setup", "")) if isinstance(doc.get("testbed"), dict) else "")
 
 
-__all__ = ["DEG", "TestbedFigures", "figures_from_testbed"]
+__all__ = ["DEG", "TestbedFigures", "figures_from_testbed", "log_testbed", "no_testbed"]

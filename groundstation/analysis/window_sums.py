@@ -31,9 +31,10 @@ def exclusion_rule(sensor: str, figures: TestbedFigures, bits: int,
         return None, rail.removeprefix(" or ") if rail else ""
     range_rad = figures.autocollimator_range_rad
     if range_rad is None:
-        notes.append("the autocollimator's calibrated range is unknown (the log records no "
-                     "testbed file with [sensors] autocollimator_range): only samples at "
-                     "the A/D rail are excluded; give --testbed FILE for the range")
+        known = figures.source or figures.missing
+        notes.append(f"the autocollimator's calibrated range is unknown ({known}; it is "
+                     f"[sensors] autocollimator_range): only samples at the A/D rail are "
+                     f"excluded; give --testbed FILE for the range")
         return None, "at the A/D rail" if bits else ""
     return range_rad, (f"|angle| >= {range_rad * 1e3:.4g} mrad (calibrated range "
                        f"{range_rad / DEG:g} deg, {figures.source}){rail}")
@@ -41,7 +42,7 @@ def exclusion_rule(sensor: str, figures: TestbedFigures, bits: int,
 
 def check_resistances(figures: TestbedFigures, where: object) -> None:
     if figures.resistance_coarse_ohm is None or figures.resistance_fine_ohm is None:
-        known = figures.source or "the log records no testbed file"
+        known = figures.source or figures.missing
         raise AnalysisError(f"{where}: the motor resistances ([motor_coarse] / [motor_fine] "
                             f"resistance) are unknown ({known}): give --testbed FILE")
 

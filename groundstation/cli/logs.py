@@ -51,7 +51,7 @@ def _cmd_record(args) -> int:
                 return EXIT_REFUSED
             if args.notes:
                 rec.note(args.notes)
-            _check_testbed(client, testbed, rec)
+            _record_device(client, keeper.address, testbed, rec)
             code, reason = _record_loop(args, rec, keeper, client, stop, failures, format_snapshot)
         finally:
             keeper.close()
@@ -88,15 +88,27 @@ def _record_loop(args, rec, keeper, client: DeviceLink, stop, failures,
               f"{st.bytes / 1e6:.1f} MB | {format_snapshot(client.stats.snapshot())}", flush=True)
 
 
-def _check_testbed(client: CommandChannel, testbed, rec) -> None:
-    """--testbed names the rig the log describes: warn (and journal it) when the device
-    says it runs another one.  A device names its configuration in GET_INFO's free-text
-    description; the simulated testbed names its testbed file there."""
-    if testbed is None:
-        return
+def _record_device(client: CommandChannel, address: str, testbed, rec) -> None:
+    """Journal what the device says it is (GET_INFO).  Without --testbed, the testbed
+    file its description names (logs/device_testbed.py) goes into the journal with it,
+    so that `analyze` finds the testbed's constants; with --testbed, warn (and journal
+    it) when the device says it runs another testbed."""
+    from ..logs.device_testbed import JOURNAL_KIND, described_testbed, device_record
+
     try:
-        description = str(client.command("GET_INFO").reply.get("description", ""))
-    except GroundStationError:
+        reply = client.command("GET_INFO").reply
+    except GroundStationError as exc:
+        rec.note(f"the device did not say what it is (GET_INFO: {exc})")
+        return
+    description = str(reply.get("description", ""))
+    named, why = (None, "") if testbed is not None else described_testbed(description)
+    rec.record(JOURNAL_KIND, device_record(address, reply, named))
+    if testbed is None:
+        print(f"testbed: {named.path}, named by the device at connect (\"{description}\"); "
+              f"recorded in the log (--testbed FILE records another)" if named is not None else
+              f"note: the log records no testbed file: {why} - analysing it needs --testbed "
+              f"FILE for the motor resistances and the autocollimator's range (or record "
+              f"with --testbed FILE)", flush=True)
         return
     rec.record("note", {"text": f"device: {description}"})
     if testbed.path.name in description or testbed.name in description:
