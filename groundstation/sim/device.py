@@ -43,6 +43,10 @@ def housekeeping_divider(dictionary: Dictionary) -> int:
     return divider
 
 
+#: realtime pacing without a session: control periods run per wake-up of the tick loop
+#: (0.1 s at 1200 Hz; well below _catch_up's half second, beyond which periods are skipped)
+IDLE_PERIODS = 120
+
 #: commands whose whole result is in their RESPONSE (keep-alive, identity, the blocks of
 #: a transfer, read-backs): executing one asks for no device time to confirm it
 ANSWERED_IN_FULL = frozenset({"HEARTBEAT", "GET_INFO", "PARAM_BEGIN", "PARAM_WRITE", "PARAM_READ",
@@ -165,6 +169,15 @@ class SimulatedDevice:
         self._t0: float | None = None
         self._ticks_done = 0
         self.datagrams_sent = 0
+        #: realtime pacing: wake-ups of the tick loop (one per control period in a
+        #: session, one per IDLE_PERIODS without one)
+        self.loop_wakeups = 0
+        #: set to wake the tick loop early: a session opened, or the device stops
+        self._wake = threading.Event()
+        self._idling = False
+        #: the tick loop's clock and wait (test hook: a test runs it on a clock of its own)
+        self.monotonic: Callable[[], float] = time.monotonic
+        self.wait: Callable[[float], Any] = self._wake.wait
 
     # ------------------------------------------------------------------ lifecycle
     def start(self) -> "SimulatedDevice":
@@ -209,6 +222,7 @@ class SimulatedDevice:
 
     def stop(self) -> None:
         self._stop.set()
+        self._wake.set()
         if self._listener is not None:
             self._listener.close()
         for conn in list(self._connections.values()):
@@ -290,6 +304,8 @@ class SimulatedDevice:
             self._flush_events()
             if confirm and self.pacing == SimPacing.MANUAL and self.after_commands is not None:
                 self.after_commands(housekeeping)
+            if self._idling and self.firmware.session_token is not None:
+                self._wake.set()          # an idle tick loop goes back to every period
         conn.send(b"".join(out))
 
     def _answer_other_version_connect(self, conn: _Connection, data: bytes) -> None:
@@ -533,7 +549,7 @@ class SimulatedDevice:
         """Realtime pacing: run the control periods that are due by the wall clock."""
         rate = self.dictionary.control_rate_hz * self.speed     # periods per wall second
         with self._lock:
-            due = int((time.monotonic() - self._t0) * rate) - self._ticks_done
+            due = int((self.monotonic() - self._t0) * rate) - self._ticks_done
             max_batch = int(rate // 2)
             if due > max_batch:          # we fell behind (machine busy): skip, and say so
                 self.firmware.overruns += due - max_batch
@@ -544,13 +560,22 @@ class SimulatedDevice:
                 self._ticks_done += due
 
     def _tick_loop(self) -> None:
-        self._t0 = time.monotonic()
+        self._t0 = self.monotonic()
         self._ticks_done = 0
+        period = 1.0 / (self.dictionary.control_rate_hz * self.speed)     # wall seconds
         while not self._stop.is_set():
             if self.pacing == SimPacing.FAST:
                 self.run_ticks(self.housekeeping_divider)    # one housekeeping period
                 continue
+            self._wake.clear()            # before the session is looked at
             self._catch_up()
-            # sleep to the next control period's start, so frames leave on time
-            next_due = self._t0 + (self._ticks_done + 1) / (self.dictionary.control_rate_hz * self.speed)
-            time.sleep(max(0.0002, next_due - time.monotonic()))
+            self.loop_wakeups += 1
+            # in a session, wake at the next control period's start, so frames leave on
+            # time (SPEC §5.5); without one nothing is sent (§1.3), so the plant runs IDLE_PERIODS
+            # at a time - a command runs the periods due first (_on_commands), so the
+            # device clock a connecting host finds is the same
+            with self._lock:              # as _on_commands looks at it: no wake is lost
+                self._idling = self.firmware.session_token is None
+            ahead = IDLE_PERIODS if self._idling else 1
+            next_due = self._t0 + (self._ticks_done + ahead) * period
+            self.wait(max(0.0002, next_due - self.monotonic()))
