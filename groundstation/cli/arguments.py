@@ -38,6 +38,31 @@ positive_seconds = number(lambda v: 0 < v < math.inf, "must be a finite number o
 count = number(lambda v: v >= 1, "must be >= 1", convert=int, what="a whole number")
 
 
+#: where a listening port the user chooses binds when no host is given: this host only
+LOOPBACK = "127.0.0.1"
+
+
+def listen_address(text: str) -> tuple[str, int]:
+    """An argparse `type` for a port to listen on: `PORT` (on 127.0.0.1) or `HOST:PORT`
+    (`[IPv6]:PORT`); PORT 0 lets the system choose.  Returns (host, port)."""
+    host, sep, port_text = text.rpartition(":")
+    host = host.strip("[]") if sep else LOOPBACK
+    try:
+        port = int(port_text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"must be PORT or HOST:PORT (e.g. 8786 or 0.0.0.0:8786), not {text!r}") from None
+    if not 0 <= port <= 65535:
+        raise argparse.ArgumentTypeError(f"the port must be 0 (any free port) .. 65535, not {port}")
+    if sep and not host:
+        raise argparse.ArgumentTypeError(f"no host before the ':' in {text!r}: give HOST:PORT, or "
+                                         f"PORT alone for {LOOPBACK}")
+    return host, port
+
+
+listen_address.__name__ = "address"            # argparse's fallback wording
+
+
 def command_group(sub: argparse._SubParsersAction, name: str, help_text: str,
                   *adders: Callable[[argparse._SubParsersAction], None]
                   ) -> argparse._SubParsersAction:

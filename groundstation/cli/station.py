@@ -22,11 +22,12 @@ def fail(text: str, code: int = EXIT_REFUSED) -> int:
 
 def status_for(exc: BaseException) -> int:
     """The exit status for an error that stopped a device command: 2 when the device could
-    not be reached at all (nothing was sent: as `monitor` and `record` say it), 1 when it
-    refused or failed on the way."""
-    from ..core.errors import DeviceUnreachableError
+    not be reached at all, or a port to listen on (the simulator's) was taken (nothing was
+    sent: as `monitor` and `record` say it), 1 when it refused or failed on the way."""
+    from ..core.errors import DeviceUnreachableError, PortInUseError
 
-    return EXIT_CANNOT_START if isinstance(exc, DeviceUnreachableError) else EXIT_REFUSED
+    cannot_start = isinstance(exc, (DeviceUnreachableError, PortInUseError))
+    return EXIT_CANNOT_START if cannot_start else EXIT_REFUSED
 
 
 def print_progress(step: str, fraction: float) -> None:

@@ -15,7 +15,7 @@ import subprocess
 import sys
 import time
 
-from ..core.errors import LinkError
+from ..core.errors import LinkError, PortInUseError
 
 ANNOUNCE = "LISTENING "
 FG_ANNOUNCE = "FG_LISTENING "       # the function generator's line (sim --fg-port)
@@ -25,6 +25,7 @@ class SimulatorProcess:
     def __init__(self, *, host: str = "127.0.0.1", tcp_port: int = 0, pacing: str = "realtime",
                  seed: int = 0, testbed: str | None = None, start_timeout: float = 60.0,
                  speed: float = 1.0, fg_port: int | None = None, deviations: tuple = ()):
+        self.host, self.tcp_port = host, tcp_port
         self.args = [sys.executable, "-m", "groundstation", "sim", "--host", host,
                      "--tcp-port", str(tcp_port), "--pacing", pacing, "--seed", str(seed),
                      "--announce"] + (["--testbed", str(testbed)] if testbed else [])
@@ -62,10 +63,22 @@ class SimulatorProcess:
                     return self.address
                 if not line and self.proc.poll() is not None:
                     break
-        err = self.proc.stderr.read() if self.proc.poll() is not None and self.proc.stderr else ""
+        code = self.proc.poll()
+        err = self.proc.stderr.read() if code is not None and self.proc.stderr else ""
         self.stop()
-        raise LinkError(f"the simulated testbed did not start within {self.start_timeout} s"
-                        + (f": {err.strip().splitlines()[-1]}" if err.strip() else ""))
+        why = err.strip().splitlines()[-1] if err.strip() else ""
+        if code is not None and "in use" in why:
+            # the child's words name its own option (--tcp-port); whoever asked for this
+            # port knows it by another name (--sim-port, a script's argument)
+            raise PortInUseError(
+                f"the simulated testbed cannot listen on {self.host}:{self.tcp_port}: the port "
+                f"(TCP, or the UDP port of the same number its telemetry leaves from) is in use "
+                f"by another program - choose another port, or 0 for any free one "
+                f"({why.removeprefix('error: ').split(' - ')[0]})")
+        if code is not None:
+            raise LinkError(f"the simulated testbed's process ended (status {code}) before it "
+                            f"listened" + (f": {why}" if why else ""))
+        raise LinkError(f"the simulated testbed did not start within {self.start_timeout} s")
 
     def gone(self) -> str:
         """Why the simulator can no longer answer ("" while its process runs)."""
