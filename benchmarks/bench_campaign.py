@@ -177,10 +177,14 @@ def main() -> None:
                          "user runs them, wall time split per step kind and CPU per process "
                          "(campaign_whole.py)")
     ap.add_argument("--analysis", action="store_true", help="--whole: with the analysis at the end")
+    ap.add_argument("--before", metavar="DIR", default=None,
+                    help="--whole: also run each campaign from this checkout (a git worktree of "
+                         "an earlier commit), interleaved, for a before/after in one run")
     args = ap.parse_args()
     print(f"campaign benchmark - {machine()}, load average {os.getloadavg()[0]:.1f} at the start")
     if args.whole:
-        return whole_campaigns(args.whole, args.rounds, args.analysis)
+        return whole_campaigns(args.whole, args.rounds, args.analysis,
+                               Path(args.before).resolve() if args.before else None)
     ways = {"ours": (FastPacing(), "held", "process"), "inline": (FastPacing(), "held", "inline"),
             "one chunk": (ONE_CHUNK_IN_FLIGHT, "realtime", "inline")}
     runs: dict[str, list[dict]] = {k: [] for k in ways}
@@ -229,22 +233,24 @@ def main() -> None:
     print(f"written to {save('campaign', res)}")
 
 
-def whole_campaigns(names: list[str], rounds: int, analysis: bool) -> None:
-    """Each campaign `rounds` times, interleaved, the simulator alone measured before each
-    round; the round with the median wall time is printed in full."""
+def whole_campaigns(names: list[str], rounds: int, analysis: bool, before: Path | None) -> None:
+    """Each campaign `rounds` times (and from `before` too), interleaved, the simulator
+    alone measured before each round; the round with the median wall time is printed in
+    full."""
     paths = [Path(n).resolve() if Path(n).exists() else ROOT / "profiles" / "campaigns" / f"{n}.toml"
              for n in names]
-    results: dict[str, list[dict]] = {p.stem: [] for p in paths}
+    trees = [("now", None)] + ([("before", before)] if before is not None else [])
+    results: dict[str, list[dict]] = {f"{p.stem} {label}": [] for p in paths for label, _ in trees}
     limits = []
     for r in range(rounds):
         rate, _ = simulator_alone(60.0)
         limits.append(rate)
-        for p in paths:
-            x = whole(p, analysis=analysis)
+        for p, (label, tree) in ((p, t) for p in paths for t in trees):
+            x = whole(p, analysis=analysis, tree=tree)
             x["simulator_alone_x"] = rate
             x["ratio_to_limit"] = x["device_per_wall"] / rate
-            results[p.stem].append(x)
-            print(f"  round {r + 1} {p.stem}: {x['device_per_wall']:.1f}x real time "
+            results[f"{p.stem} {label}"].append(x)
+            print(f"  round {r + 1} {p.stem} {label}: {x['device_per_wall']:.1f}x real time "
                   f"({x['ratio_to_limit']:.2f} of the simulator alone, {rate:.1f}x), "
                   f"{x['wall_s']:.2f} s wall, load {os.getloadavg()[0]:.1f}")
     print(f"\nthe median round of each (load average now {os.getloadavg()[0]:.1f}):")

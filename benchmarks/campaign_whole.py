@@ -113,15 +113,20 @@ def _device_seconds(folder: Path) -> tuple[float, int]:
     return frames / 1200.0, logs
 
 
-def whole(campaign: Path, *, analysis: bool) -> dict:
-    """One whole campaign, split as the module says."""
+def whole(campaign: Path, *, analysis: bool, tree: Path | None = None) -> dict:
+    """One whole campaign, split as the module says.  `tree`: run the package of another
+    checkout (a `git worktree` of an earlier commit: before and after in one run)."""
+    env = dict(os.environ)
+    if tree is not None:
+        env["PYTHONPATH"] = str(tree)
+        campaign = tree / campaign.relative_to(ROOT)
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "groundstation", "campaign", "run", str(campaign),
                "--device", "sim", "--fast"] + ([] if analysis else ["--no-analysis"])
         t_launch = time.time()
         w0 = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=tmp, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                text=True)
+                                text=True, env=env)
         sampler = TreeSampler(proc.pid)
         output, _ = proc.communicate()
         wall = time.perf_counter() - w0
@@ -144,12 +149,13 @@ def whole(campaign: Path, *, analysis: bool) -> dict:
     # between the runner's start and end, what no step accounts for (the runner's own work)
     split["between steps"] = max(0.0, (report["finished"] - report["started"]) - steps_total)
     split["after steps"] = t_exit - report["finished"]
-    return {"campaign": campaign.stem, "analysis": analysis, "wall_s": wall, "device_s": device_s,
+    return {"campaign": campaign.stem, "tree": str(tree or ROOT), "analysis": analysis,
+            "wall_s": wall, "device_s": device_s,
             "logs": logs, "device_per_wall": device_s / wall, "split_s": split, "cpu_s": cpu}
 
 
 def print_whole(r: dict, limit_x: float) -> None:
-    print(f"  {r['campaign']} ({'with' if r['analysis'] else 'no'} analysis): {r['logs']} logs, "
+    print(f"  {r['campaign']} ({'with' if r['analysis'] else 'no'} analysis, {r['tree']}): {r['logs']} logs, "
           f"{r['device_s']:.1f} device s in {r['wall_s']:.2f} wall s = {r['device_per_wall']:.1f}x "
           f"real time, {r['device_per_wall'] / limit_x:.2f} of the simulator alone ({limit_x:.1f}x)")
     for name, s in r["split_s"].items():

@@ -47,6 +47,7 @@ class CampaignRunner:
             report.completed_runs = sorted(skip_runs)
             report.recordings = list(resume.recordings)
         recordings_before = self._tagged = len(self.tb.recordings)
+        self._prepare_writers()
         current_run, run_failed = 0, False
         step: Step | None = None
         try:
@@ -113,6 +114,14 @@ class CampaignRunner:
             report.completed_runs = sorted(set(report.completed_runs))
             report.finished = time.time()
         return report
+
+    def _prepare_writers(self) -> None:
+        """More than one recording to come: each run's log writer is started ahead, during
+        the run before it (logs/standby.py, through the station's RecordingSlot)."""
+        if sum(s.action == "start_recording" for s in self.campaign.steps) > 1:
+            recording = getattr(self.tb, "recording", None)
+            if recording is not None:
+                recording.prepare_ahead()
 
     def _tag(self, step: Step | None) -> None:
         """The recordings that ended since the last call belong to `step`'s run."""

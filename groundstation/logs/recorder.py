@@ -24,7 +24,7 @@ import time
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
-from typing import Any, Callable
+from typing import TYPE_CHECKING, Any, Callable
 
 import numpy as np
 
@@ -35,6 +35,9 @@ from .atomic import create_new
 from .messages import Closed, Failed, Flushed, Frames, JournalEntry, Started, StartFailed, Stop, Stopped
 from .schema import JOURNAL_KINDS
 from .writer import writer_main
+
+if TYPE_CHECKING:
+    from .standby import WriterStandby
 
 log = logging.getLogger(__name__)
 
@@ -154,7 +157,7 @@ class Recorder:
                  on_failure: Callable[[str], None] | None = None,
                  on_flush: Callable[["RecorderStatus", float | None], None] | None = None,
                  compression: dict | None = None, chunk_rows: int | None = None,
-                 writer_niceness: int = 0):
+                 writer_niceness: int = 0, standby: "WriterStandby | None" = None):
         """`chunk_rows`: rows per HDF5 chunk of the per-frame datasets (None: the
         schema's CHUNK_ROWS, sized for a live link; a fast campaign passes
         schema.FAST_CHUNK_ROWS).  `writer_niceness` (>= 0) lowers the writer process's
@@ -163,6 +166,9 @@ class Recorder:
         still waits for the writer's queue, so nothing is discarded."""
         if writer_niceness < 0:
             raise ValueError(f"writer_niceness must be >= 0, not {writer_niceness!r}")
+        #: a WriterStandby (standby.py) whose spare writer, already started, this
+        #: recording takes instead of starting one (a campaign's runs: no wait at start)
+        self.standby = standby
         self.d = dictionary
         self.folder = Path(folder)
         self.test_name = test_name
@@ -239,15 +245,27 @@ class Recorder:
         return self.path
 
     def _start_writer(self, path: Path, run: int, timeout: float) -> Started:
-        """Spawn the writer on the reserved `path` and wait for its Started."""
-        ctx = mp.get_context("spawn")
-        self._inbox = ctx.Queue(maxsize=self.queue_blocks)
-        self._outbox = ctx.Queue()
-        self._proc = ctx.Process(target=writer_main, name="gs-log-writer", daemon=True,
-                                 args=(self._inbox, self._outbox, str(self._protocol_dir()),
-                                       {**self.config, "path": str(path), "run": run}))
-        with _terminal_interrupt_held():        # the child starts with SIGINT held
-            self._proc.start()
+        """Spawn the writer on the reserved `path` (or hand it to the standby's spare)
+        and wait for its Started."""
+        config = {**self.config, "path": str(path), "run": run}
+        protocol_dir = str(self._protocol_dir())
+        spare = self.standby.take(self.queue_blocks) if self.standby is not None else None
+        if spare is not None:
+            try:
+                spare.orders.send((protocol_dir, config))
+                self._proc, self._inbox, self._outbox = spare.proc, spare.inbox, spare.outbox
+                spare.orders.close()
+            except OSError:                 # it died after take() looked: start one anew
+                spare.discard()
+                spare = None
+        if spare is None:
+            ctx = mp.get_context("spawn")
+            self._inbox = ctx.Queue(maxsize=self.queue_blocks)
+            self._outbox = ctx.Queue()
+            self._proc = ctx.Process(target=writer_main, name="gs-log-writer", daemon=True,
+                                     args=(self._inbox, self._outbox, protocol_dir, config))
+            with _terminal_interrupt_held():        # the child starts with SIGINT held
+                self._proc.start()
         deadline = time.monotonic() + timeout
         while True:
             try:
@@ -433,11 +451,18 @@ class Recorder:
             try:
                 msg = self._outbox.get(timeout=0.2)
             except queue.Empty:
-                if self._proc is not None and not self._proc.is_alive():
+                if self._proc is None or self._proc.is_alive():
+                    continue
+                # It ended.  What it sent first is in the pipe already (a writer flushes
+                # its queue before it exits: Stopped, or Failed on a full disk), and may
+                # have landed after the wait above gave up: read that before calling the
+                # end unexpected
+                try:
+                    msg = self._outbox.get(timeout=0.2)
+                except (queue.Empty, EOFError, OSError):
                     self._failed(f"the log writer process ended unexpectedly (exit code "
                                  f"{self._proc.exitcode})", self.last_flushed_host_time)
                     return
-                continue
             except (EOFError, OSError):
                 return
             if isinstance(msg, Flushed):

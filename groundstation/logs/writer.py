@@ -55,11 +55,41 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
     # how the recording ends and tells it to close ("stop"); if the parent is gone, the
     # writer notices (_Writer.receive) and closes the file itself.
     ignore_terminal_interrupt()
+    _write_recording(inbox, outbox, protocol_dir, config)
+
+
+def spare_writer_main(inbox, outbox, orders, parent_pid: int) -> None:
+    """Entry point of a spare writer (standby.py): spawned ahead, its imports done, it
+    waits for the recording's settings on `orders` and then writes it as writer_main
+    does.  A closed pipe (the standby discarded it) or a parent gone ends it unused."""
+    from .standby import PARENT_CHECK_S
+
+    ignore_terminal_interrupt()
+    while True:
+        try:
+            if orders.poll(PARENT_CHECK_S):
+                protocol_dir, config = orders.recv()
+                break
+        except (EOFError, OSError):
+            return
+        if os.getppid() != parent_pid:
+            return
+    orders.close()
+    _write_recording(inbox, outbox, protocol_dir, config)
+
+
+def _write_recording(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> None:
     if config.get("writer_niceness"):
         # not permitted here (OSError): the writer runs at the usual priority
         with contextlib.suppress(OSError):
             os.nice(config["writer_niceness"])
     _Writer(inbox, outbox, load_dictionary(protocol_dir), config).run()
+    # The file is closed and the last report is queued: once it has reached the pipe,
+    # end without the interpreter's teardown of numpy and h5py, which the recorder
+    # would otherwise wait out at every stop (a few hundred ms on a busy machine)
+    outbox.close()
+    outbox.join_thread()
+    os._exit(0)
 
 
 class _Writer:

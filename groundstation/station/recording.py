@@ -32,6 +32,8 @@ class RecordingSlot:
         self._detach: Callable[[], None] | None = None
         self._drops_at_start = 0
         self._t0 = 0.0
+        #: the log writers started ahead (prepare_ahead), or None
+        self.standby = None
 
     @property
     def active(self) -> bool:
@@ -47,7 +49,8 @@ class RecordingSlot:
         rec = Recorder(dictionary, folder, test_name=name, notes=notes,
                        testbed_text=testbed.path.read_text(), testbed_name=testbed.name,
                        testbed_path=str(testbed.path), on_failure=on_failure,
-                       chunk_rows=chunk_rows, writer_niceness=writer_niceness)
+                       chunk_rows=chunk_rows, writer_niceness=writer_niceness,
+                       standby=self.standby)
         path = rec.start()
         try:
             if client is not None:
@@ -70,6 +73,21 @@ class RecordingSlot:
             rec.note(notes)
         self.echo(f"recording {path}")
         return path
+
+    def prepare_ahead(self) -> None:
+        """Several recordings follow (a campaign's runs): from now on each one's log
+        writer process is started ahead, during the recording before it, so a recording
+        starts without waiting for a fresh interpreter's imports (logs/standby.py).
+        Costs one idle process between recordings."""
+        if self.standby is None:
+            from ..logs.standby import WriterStandby
+            self.standby = WriterStandby()
+        self.standby.prepare()
+
+    def close_standby(self) -> None:
+        standby, self.standby = self.standby, None
+        if standby is not None:
+            standby.close()
 
     def attach(self, client: DeviceLink) -> None:
         """A new link of the same session (a reconnect): the recording goes on on it."""

@@ -264,8 +264,8 @@ class Station:
 
     def close(self) -> None:
         """Close everything this session opened (after make_safe)."""
-        for step in (self.recording.close, self._close_generator, self._close_clock,
-                     self._close_client, self._stop_sim):
+        for step in (self.recording.close, self.recording.close_standby, self._close_generator,
+                     self._close_clock, self._close_client, self._stop_sim):
             try:
                 step()
             except Exception:                          # closing must reach every step

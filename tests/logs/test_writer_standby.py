@@ -1,0 +1,99 @@
+"""A writer process started ahead of its recording (logs/standby.py): the recording takes
+it instead of starting one, the log is the same, a spare that died is replaced by an
+ordinary start, and no spare outlives its owner."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from conftest import HighRateFeeder, wait_for
+from groundstation.logs import LogReader, Recorder
+from groundstation.logs.standby import WriterStandby
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def _alive(pid: int) -> bool:
+    """A process that exists and is not a zombie."""
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def _record(dictionary, folder, standby, name, first_seq):
+    rec = Recorder(dictionary, folder, test_name=name, standby=standby, flush_interval_s=0.05)
+    rec.start()
+    writer_pid = rec._proc.pid
+    feed = HighRateFeeder(dictionary, rec)
+    seq = np.arange(first_seq, first_seq + 1200)
+    feed(seq, encoder_outer=np.linspace(0.0, 1e-3, seq.size))
+    status = rec.stop()
+    assert status.state == "stopped", status.error
+    return status, writer_pid, seq
+
+
+def test_recordings_take_the_spare_writer_and_write_the_same_log(tmp_path, dictionary):
+    standby = WriterStandby()
+    try:
+        standby.prepare()
+        spare_pid = standby._spare.proc.pid
+        status, writer_pid, seq = _record(dictionary, tmp_path, standby, "warm", 0)
+        assert writer_pid == spare_pid                 # the spare wrote it
+        assert (standby.spawned, standby.used) == (2, 1)   # and the next one waits
+        next_pid = standby._spare.proc.pid
+        status2, writer_pid2, seq2 = _record(dictionary, tmp_path, standby, "warm", 5000)
+        assert writer_pid2 == next_pid
+        # a log written by a spare is a log like any other
+        cold, _, _ = _record(dictionary, tmp_path / "cold", None, "cold", 0)
+        for st, expected in ((status, seq), (status2, seq2), (cold, seq)):
+            with h5py.File(st.files[0], "r") as f:
+                assert f.attrs["clean_close"]
+                assert np.array_equal(f["telemetry/HIGH_RATE/sequence"][:], expected)
+        last_spare = standby._spare.proc
+    finally:
+        standby.close()
+    assert not _alive(last_spare.pid)                  # close() ended the spare left over
+
+
+def test_a_spare_that_died_is_replaced_by_an_ordinary_start(tmp_path, dictionary):
+    standby = WriterStandby()
+    try:
+        standby.prepare()
+        dead = standby._spare.proc
+        dead.kill()
+        dead.join(10)
+        status, writer_pid, seq = _record(dictionary, tmp_path, standby, "after-death", 0)
+        assert writer_pid != dead.pid and standby.used == 0
+        with LogReader(str(status.files[0])) as log:
+            assert log.n_frames("HIGH_RATE") == seq.size
+    finally:
+        standby.close()
+
+
+def test_a_spare_whose_owner_is_gone_ends_by_itself(tmp_path):
+    """An owner killed without closing its standby (SIGKILL, a crash) leaves no writer
+    process behind: the spare sees its parent gone and ends."""
+    script = tmp_path / "owner.py"
+    script.write_text(textwrap.dedent("""
+        import os, sys
+        from groundstation.logs.standby import WriterStandby
+        if __name__ == "__main__":
+            standby = WriterStandby()
+            standby.prepare()
+            print(standby._spare.proc.pid, flush=True)
+            os._exit(0)                      # no close(): as if killed
+    """))
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=120, cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert done.returncode == 0, done.stderr
+    spare_pid = int(done.stdout.split()[0])
+    wait_for(lambda: not _alive(spare_pid), timeout=60)
