@@ -19,10 +19,19 @@ from ..common.steady_label import SteadyLabel
 from ..session.session import Session
 
 #: commands the station sends by itself, many at a time (a table read-back is one
-#: PARAM_READ per block, an upload one WRITE per block): a completion is counted on one
-#: line, a failure has its own (the upload's BEGIN and COMMIT keep theirs)
-ROUTINE_COMMANDS = {"PARAM_READ": "read-backs", "PARAM_WRITE": "blocks written",
-                    "PROFILE_WRITE": "blocks written", "GET_INFO": "device queries"}
+#: PARAM_READ per block, an upload one *_WRITE per block): a completion is counted on one
+#: line, a failure has its own (the upload's BEGIN and COMMIT keep theirs).  The block
+#: writes are matched by their suffix: the table commands' names appear only where they
+#: are sent (tests/station/test_upload_gate.py holds the package to that)
+ROUTINE_COMMANDS = {"PARAM_READ": "read-backs", "GET_INFO": "device queries"}
+BLOCK_WRITE_SUFFIX = "_WRITE"
+
+
+def routine_kind(name: str) -> str | None:
+    """What a completed routine command counts as on its folded line, or None."""
+    if name.endswith(BLOCK_WRITE_SUFFIX):
+        return "blocks written"
+    return ROUTINE_COMMANDS.get(name)
 STATE_COLOURS = {GREEN: QColor("#2e7d32"), YELLOW: QColor("#f9a825"), RED: QColor("#c62828")}
 
 
@@ -278,7 +287,7 @@ class CommandPanel(QWidget):
         colour = {"COMPLETED": "#2e7d32", "ACCEPTED": "#1565c0", "REJECTED": "#c62828",
                   "FAILED": "#c62828", "TIMEOUT": "#c62828", "CANCELLED": "#616161"}.get(stage, "")
         now = datetime.now()
-        if name in ROUTINE_COMMANDS and stage == "COMPLETED":
+        if routine_kind(name) is not None and stage == "COMPLETED":
             self._routine(name, now, colour)
             return
         text = f"{now:%H:%M:%S}  {name}: {stage}" + (f" ({reason})" if reason not in ("", "OK") else "")
@@ -300,7 +309,7 @@ class CommandPanel(QWidget):
         else:
             self.stages.takeItem(self.stages.row(item))
         # the line's time is the last completion's, as every line's is its command's
-        item.setText(f"{now:%H:%M:%S}  {name} ×{count} {ROUTINE_COMMANDS[name]}, last COMPLETED")
+        item.setText(f"{now:%H:%M:%S}  {name} ×{count} {routine_kind(name)}, last COMPLETED")
         self._insert(item)
 
     def _insert(self, item: QListWidgetItem) -> None:
