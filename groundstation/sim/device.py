@@ -563,6 +563,9 @@ class SimulatedDevice:
         self._t0 = self.monotonic()
         self._ticks_done = 0
         period = 1.0 / (self.dictionary.control_rate_hz * self.speed)     # wall seconds
+        # an idle batch stays well inside _catch_up's half second of wall time (a slowed
+        # device, speed < 1, has fewer periods in it), so no idle period counts as overrun
+        idle_batch = max(1, min(IDLE_PERIODS, int(0.25 / period)))
         while not self._stop.is_set():
             if self.pacing == SimPacing.FAST:
                 self.run_ticks(self.housekeeping_divider)    # one housekeeping period
@@ -576,6 +579,6 @@ class SimulatedDevice:
             # device clock a connecting host finds is the same
             with self._lock:              # as _on_commands looks at it: no wake is lost
                 self._idling = self.firmware.session_token is None
-            ahead = IDLE_PERIODS if self._idling else 1
+            ahead = idle_batch if self._idling else 1
             next_due = self._t0 + (self._ticks_done + ahead) * period
             self.wait(max(0.0002, next_due - self.monotonic()))

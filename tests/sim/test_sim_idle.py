@@ -75,6 +75,22 @@ def test_an_idle_device_wakes_once_per_idle_batch_and_keeps_its_clock(device):
     assert per_second <= 2 * 1200 / IDLE_PERIODS + 1 and IDLE_PERIODS >= 60, per_second
 
 
+def test_a_slowed_device_idles_without_overruns(dictionary):
+    """At speed 0.1 (120 periods per wall second) an idle batch of 120 periods would be
+    a whole second late for _catch_up, which skips what is over half a second as
+    overruns: the batch is smaller there."""
+    dev = SimulatedDevice(dictionary, pacing="realtime", seed=1, speed=0.1)
+    clock = DeviceClock(dev._wake)
+    dev.monotonic, dev.wait = clock.now, clock.wait
+    dev.start()
+    try:
+        clock.run_to(20.0)                             # 2400 periods at 120 per second
+        assert dev.firmware.tick >= 2400 - 30 and dev.firmware.overruns == 0
+        assert dev.loop_wakeups <= 2 * dev.firmware.tick / 30 + 2
+    finally:
+        dev.stop()
+
+
 def test_a_session_brings_the_loop_back_to_every_period(device, dictionary):
     dev, clock = device
     clock.run_to(1.0)
