@@ -37,6 +37,7 @@ from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
+from ..core.kinds import Setup
 from ..logs import LogReader
 from ..logs.channels import convertible, to_engineering
 from ..plant.testbed import Testbed
@@ -52,6 +53,10 @@ from .window_sums import WindowSums, check_resistances, exclusion_rule
 PACKET = "HIGH_RATE"
 SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
 DEFAULT_SENSOR = "autocollimator"           # the reference's scoring sensor
+#: the sensor chosen per log by its testbed: the relative set-up has no autocollimator
+#: (nor IMU), its pointing is the inner encoder's; the inertial one scores the mirror
+AUTO_SENSOR = "auto"
+SENSOR_BY_SETUP = {Setup.RELATIVE: "encoder_inner", Setup.INERTIAL: DEFAULT_SENSOR}
 METRICS = ("jitter", "energy", "psd")
 DEFAULT_CHUNK_ROWS = 1 << 18                # ~2 MB per float64 column read at once
 CURRENTS = ("current_coarse", "current_fine")
@@ -190,8 +195,9 @@ def _metrics(metrics: Iterable[str]) -> tuple[str, ...]:
 
 
 def _check_sensor(sensor: str) -> None:
-    if sensor not in SENSORS:
-        raise AnalysisError(f"unknown sensor {sensor!r}; choose from {', '.join(SENSORS)}")
+    if sensor not in SENSORS and sensor != AUTO_SENSOR:
+        raise AnalysisError(f"unknown sensor {sensor!r}; choose from {', '.join(SENSORS)} "
+                            f"or {AUTO_SENSOR}")
 
 
 def analyze_log(path: str | Path, *, metrics: Iterable[str] = METRICS, start_s: float | None = None,
@@ -334,6 +340,8 @@ def _analyze(r: LogReader, wanted, start_s, stop_s, sensor, integration_period_s
     rate = r.tick_rate_hz
     figures = figures_from_testbed(r, testbed)
     notes: list[str] = []
+    if sensor == AUTO_SENSOR:
+        sensor = SENSOR_BY_SETUP.get(figures.setup, DEFAULT_SENSOR)
     plan = _Reading(columns=["tick"], scoring="jitter" in wanted or "psd" in wanted)
     if plan.scoring:
         _plan_sensor(r, chans, sensor, figures, plan, notes)

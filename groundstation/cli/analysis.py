@@ -27,6 +27,7 @@ FRF_OUTPUTS = ("encoder_outer", "encoder_inner", "gyro_rate", "autocollimator", 
 #: coherence at or above which a frequency-response bin counts (log_frf's)
 MIN_COHERENCE = 0.9
 SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
+AUTO_SENSOR = "auto"          # analysis.log_metrics.AUTO_SENSOR: chosen per log by its testbed
 
 EPILOG = """The window (--from/--to) is in seconds of device time from the start of each log.
 Jitter figures are in urad: mean, RMS (mean included), standard deviation, the RMS after
@@ -106,8 +107,10 @@ def add_parsers(sub) -> None:
                    help="window start, s of device time from the log's start (default: its start)")
     s.add_argument("--to", dest="stop", type=arguments.seconds, default=None,
                    help="window end, s from the log's start (default: its end)")
-    s.add_argument("--sensor", choices=SENSORS, default=SENSORS[0],
-                   help="LOS signal scored (default: autocollimator, the reference's scoring sensor)")
+    s.add_argument("--sensor", choices=(AUTO_SENSOR,) + tuple(SENSORS), default=AUTO_SENSOR,
+                   help="LOS signal scored (default auto: per log, by its testbed - the "
+                        "autocollimator, the reference's scoring sensor, on the inertial set-up; "
+                        "encoder_inner on the relative set-up, which has no autocollimator)")
     s.add_argument("--integration-period", type=arguments.positive, default=1.0, metavar="S",
                    help="sensor integration period T for the high-pass and windowed figures "
                         "(default 1 s)")
@@ -154,6 +157,14 @@ def add_parsers(sub) -> None:
     b.add_argument("--workers", type=arguments.count, default=None, metavar="N",
                    help="local worker processes (default: one per core)")
     b.add_argument("--serial", action="store_true", help="the same as --scheduler none")
+    b.add_argument("--scheduler-port", type=arguments.listen_address, default=None,
+                   metavar="[HOST:]PORT",
+                   help="the local cluster's scheduler listens here (127.0.0.1 unless a host "
+                        "is given; default: a free port the system picks)")
+    b.add_argument("--dashboard", type=arguments.listen_address, default=None,
+                   metavar="[HOST:]PORT",
+                   help="serve the local cluster's Dask dashboard here (default: none; needs "
+                        "bokeh)")
     s.set_defaults(func=_cmd_analyze)
 
 
@@ -188,7 +199,8 @@ def _cmd_analyze(args) -> int:
     if args.start is not None and args.stop is not None and args.start > args.stop:
         print(f"error: --from {args.start:g} s is after --to {args.stop:g} s", file=sys.stderr)
         return 2
-    if args.table or args.scheduler or args.workers or args.serial:
+    if args.table or args.scheduler or args.workers or args.serial or args.scheduler_port \
+            or args.dashboard:
         return _cmd_batch(args)
     args.logs = _expand(args.logs)
     from ..analysis.log_metrics import analyze_log
@@ -235,7 +247,8 @@ def _cmd_analyze(args) -> int:
     if args.plot:
         spectra = [(m.path.name, m.spectrum) for _, m, _ in results if m is not None and m.spectrum]
         if spectra:
-            _plot(Path(args.plot), spectra, args.sensor)
+            scored = sorted({m.sensor for _, m, _ in results if m is not None and m.sensor})
+            _plot(Path(args.plot), spectra, " / ".join(scored) or args.sensor)
             print(f"plot: {args.plot}", file=sys.stderr)
         else:
             print("error: no spectrum to plot (no log could be analysed)", file=sys.stderr)
@@ -274,6 +287,10 @@ def _cmd_batch(args) -> int:
     scheduler = "none" if args.serial else (args.scheduler or "local")
     if args.serial and args.scheduler not in (None, "none"):
         print(f"error: --serial and --scheduler {args.scheduler}: choose one", file=sys.stderr)
+        return 2
+    if scheduler != "local" and (args.scheduler_port or args.dashboard):
+        print(f"error: --scheduler-port and --dashboard are for the local cluster this command "
+              f"starts, not with --scheduler {scheduler}", file=sys.stderr)
         return 2
     from ..analysis.batch import (TABLE_KEYS, BatchOptions, campaign_reports, default_workers,
                                   find_logs, run_serial)
@@ -324,6 +341,7 @@ def _cmd_batch(args) -> int:
         print(f"{len(paths)} logs on {where}", file=sys.stderr)
         try:
             rows = run_dask(paths, options, known, scheduler=scheduler, workers=workers,
+                            listen=args.scheduler_port, dashboard=args.dashboard,
                             progress=progress)
         except (OSError, TimeoutError) as exc:       # no scheduler there, refused, timed out
             print(f"error: Dask scheduler {scheduler}: {exc}", file=sys.stderr)

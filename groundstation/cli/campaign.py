@@ -29,7 +29,7 @@ from pathlib import Path
 from ..core.kinds import GeneratorChoice
 from ..core.errors import GroundStationError
 from . import arguments
-from .station import status_for
+from .station import add_sim_port_option, status_for
 
 EXIT_OK, EXIT_FAILED, EXIT_MALFORMED = 0, 1, 2
 EXIT_INTERRUPTED = 130            # 128 + SIGINT, as a shell reports Ctrl-C
@@ -65,6 +65,7 @@ def add_parsers(sub) -> argparse._SubParsersAction:
     # device, fast, fast-sim, seed, testbed, log folder: None when not typed, so that a
     # resume can take the report's own (campaign/run_setup.py) and see a contradiction
     s.add_argument("--device", default=None, help="sim (default) | tcp://HOST:PORT | serial://PORT?baud=N")
+    add_sim_port_option(s)
     s.add_argument("--fast", action="store_true", default=None,
                    help="with --device sim: run the simulator as fast as it goes (device time)")
     s.add_argument("--fast-sim", choices=("process", "inline"), default=None,
@@ -225,6 +226,11 @@ def _cmd_run(args) -> int:
     except GroundStationError as exc:
         _print_problems(exc)
         return EXIT_MALFORMED
+    if setup["fast"] and args.sim_port is not None:
+        print("error: --sim-port is for the real-time simulator: with --fast the simulator is "
+              "this campaign's own, on a private link - leave out one or the other",
+              file=sys.stderr)
+        return EXIT_MALFORMED
     for note in notes:
         print(note, flush=True)
     folder = Path(setup["log_folder"] or Path("logs") / c.name)
@@ -245,7 +251,7 @@ def _cmd_run(args) -> int:
         with InterruptMemory() as ctrl_c, \
                 Testbed(setup["device"], testbed=c.testbed, fast=fast, generator=generator,
                         log_folder=folder, seed=setup["seed"], take_over=args.take_over,
-                        operator=operator, publishing=publishing,
+                        operator=operator, publishing=publishing, sim_listen=args.sim_port,
                         echo=lambda text: print(f"    {text}", flush=True)) as tb:
             runner = CampaignRunner(c, tb, max_step_seconds=args.max_step_seconds,
                                     progress=_Progress(len(c.steps), ctrl_c.requested))

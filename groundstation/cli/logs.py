@@ -10,6 +10,7 @@ from pathlib import Path
 from ..core.contracts import CommandChannel, DeviceLink
 from ..core.kinds import LinkState
 from ..core.errors import GroundStationError
+from .station import add_sim_port_option
 
 
 RECORD_EPILOG = """exit status: 0 the recording ended as asked (--duration, Ctrl-C or SIGTERM: the
@@ -38,7 +39,7 @@ def _cmd_record(args) -> int:
         print(f"recording to {path}", flush=True)
         keeper = LinkKeeper(d, args.device, args.testbed, take_over=args.take_over,
                             on_client=lambda c: attach_recorder(c, rec),
-                            say=lambda text: print(text, flush=True))
+                            say=lambda text: print(text, flush=True), sim_listen=args.sim_port)
         try:
             try:
                 client = keeper.open()
@@ -222,6 +223,7 @@ def add_parsers(sub) -> None:
                        epilog=RECORD_EPILOG)
     s.add_argument("--device", default="sim",
                    help="sim | tcp://HOST:PORT | serial://PORT?baud=N (default: sim)")
+    add_sim_port_option(s)
     s.add_argument("--testbed", default=None, help="testbed file (recorded in the log; for sim: the one to run)")
     s.add_argument("--folder", default="logs", help="folder for the log files (default: logs/)")
     s.add_argument("--name", default="test", help="test name, part of the file name")

@@ -40,6 +40,7 @@ from . import profile as cli_profile
 from .. import __version__
 from ..core.errors import GroundStationError
 from . import arguments
+from .station import add_sim_port_option
 
 
 def load_dictionary(protocol_dir=None):
@@ -175,7 +176,7 @@ def _cmd_monitor(args) -> int:
     with StopRequest() as stop:
         keeper = LinkKeeper(d, args.device, args.testbed, take_over=args.take_over,
                             on_client=publish if publisher is not None else None,
-                            say=lambda text: print(text, flush=True))
+                            say=lambda text: print(text, flush=True), sim_listen=args.sim_port)
         try:
             client = keeper.open()
             info = client.command("GET_INFO").reply
@@ -316,6 +317,7 @@ def build_parser() -> argparse.ArgumentParser:
         if name == "monitor":
             s.add_argument("--device", default="sim",
                            help="sim | tcp://HOST:PORT | HOST:PORT | serial://PORT?baud=N")
+            add_sim_port_option(s)
         s.add_argument("--testbed", default=None, help="testbed file for --device sim")
         s.add_argument("--duration", type=float, default=0.0, help="seconds (0: until Ctrl-C)")
         s.add_argument("--interval", type=float, default=1.0, help="seconds between lines")

@@ -52,6 +52,15 @@ def add_device_options(s, *, history: bool = False) -> None:
                        help="folder of verified uploads, for rollback (default: "
                             "$XDG_DATA_HOME/groundstation/parameter_history)")
     s.add_argument("--take-over", action="store_true", help="end another host's session")
+    add_sim_port_option(s)
+
+
+def add_sim_port_option(s) -> None:
+    from .arguments import listen_address
+    s.add_argument("--sim-port", type=listen_address, default=None, metavar="[HOST:]PORT",
+                   help="--device sim: the port the simulated testbed serves on, so that other "
+                        "programs can reach it (127.0.0.1 unless a host is given; default: a "
+                        "free port the system picks)")
 
 
 @contextmanager
@@ -67,7 +76,7 @@ def command_station(args, dictionary, testbed: str | None = None) -> Iterator:
         history = ParameterHistory(args.history or ParameterHistory.default_folder())
     station = Station(args.device, testbed=args.testbed or testbed, generator=None,
                       history=history, take_over=args.take_over, dictionary=dictionary,
-                      echo=lambda text: None)
+                      echo=lambda text: None, sim_listen=getattr(args, "sim_port", None))
     try:
         station.open()
         if station.simulated:

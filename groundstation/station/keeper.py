@@ -46,8 +46,10 @@ class LinkKeeper:
     def __init__(self, dictionary: Dictionary, device: str, testbed: str | None = None, *,
                  take_over: bool = False,
                  on_client: Callable[[DeviceLink], Callable[[], None]] | None = None,
-                 say: Callable[[str], None] = print):
+                 say: Callable[[str], None] = print, sim_listen: tuple[str, int] | None = None):
         self.dictionary = dictionary
+        #: (host, port) the simulator started for `device` "sim" serves on (None: any port)
+        self.sim_listen = sim_listen
         self.device = device
         self.testbed = testbed
         self.take_over = take_over
@@ -66,7 +68,7 @@ class LinkKeeper:
             if self.sim is None or self.sim.gone():
                 if self.sim is not None:
                     self.sim.stop()
-                self.sim = start_simulator(self.testbed)
+                self.sim = start_simulator(self.testbed, listen=self.sim_listen)
                 self.address = self.sim.address
                 self.say(f"started the simulated testbed on {self.address}")
         else:

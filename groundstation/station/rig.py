@@ -61,16 +61,24 @@ class LocalSimulator:
 
 def start_simulator(testbed: str | Path | None, *, dictionary: Dictionary | None = None,
                     fast: bool = False, fast_sim: FastSim | str = FastSim.INLINE, seed: int = 0,
-                    speed: float = 1.0, generator: bool = False) -> LocalSimulator:
+                    speed: float = 1.0, generator: bool = False,
+                    listen: tuple[str, int] | None = None) -> LocalSimulator:
     """Start the simulated testbed of `testbed` (a testbed file; None: the simulator's
     default) in the form asked for, with its function generator when `generator`.  The
-    fast forms speak `dictionary` (the one the host's link uses)."""
+    fast forms speak `dictionary` (the one the host's link uses).  `listen`: the (host,
+    port) the real-time simulator serves on (None: 127.0.0.1, a port the system picks);
+    a fast one is the script's own, on a link nobody else joins."""
     if fast and dictionary is None:
         raise ValueError("a fast simulated testbed needs the dictionary the link speaks")
+    if fast and listen is not None:
+        raise GroundStationError("a chosen simulator port (--sim-port) is for the real-time "
+                                 "simulator: with --fast the simulator is this run's own, on a "
+                                 "private link - leave out one or the other")
     if not fast:
         from ..sim.process import SimulatorProcess
 
-        sim = SimulatorProcess(pacing="realtime", seed=seed,
+        host, port = listen if listen is not None else ("127.0.0.1", 0)
+        sim = SimulatorProcess(pacing="realtime", seed=seed, host=host, tcp_port=port,
                                testbed=str(testbed) if testbed else None, speed=speed,
                                fg_port=0 if generator else None)
         address = sim.start()

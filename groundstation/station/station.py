@@ -90,10 +90,11 @@ class Station:
                  dictionary: Dictionary | None = None,
                  operator: Callable[[str], bool] | None = None,
                  echo: Callable[[str], None] | None = None,
-                 publishing: ConsolePublishing | None = None):
-        """`device`: "sim" (the simulated testbed) or a rig's address.  `fast`: True runs
-        the simulated testbed on the script's clock with the default FastSimOptions; a
-        FastSimOptions says how.  `publishing`: publish the link for read-only consoles."""
+                 publishing: ConsolePublishing | None = None,
+                 sim_listen: tuple[str, int] | None = None):
+        """`device`: "sim" (the simulated testbed) or a rig's address.  `fast`: True runs the
+        simulated testbed on the script's clock (FastSimOptions: how).  `publishing`: the link
+        published for read-only consoles.  `sim_listen`: (host, port) of the real-time sim."""
         if not isinstance(fast, (bool, FastSimOptions)):
             raise TypeError(f"fast must be True, False or a FastSimOptions, not {fast!r}")
         if publishing is not None and not isinstance(publishing, ConsolePublishing):
@@ -103,8 +104,7 @@ class Station:
         #: fast only: where the simulated device runs and how its clock is paced
         self.fast_sim = fast if isinstance(fast, FastSimOptions) else FastSimOptions()
         #: where the link is published for read-only consoles (fanout/, docs/consoles.md)
-        self.publishing = publishing
-        self.publisher = None
+        self.publishing, self.publisher, self.sim_listen = publishing, None, sim_listen
         self.testbed_path = Path(testbed) if testbed else None
         self.generator_spec = generator
         self.log_folder = Path(log_folder)
@@ -235,7 +235,7 @@ class Station:
         if self.device_spec == SIMULATED_DEVICE:
             self._local = start_simulator(
                 self.testbed.path, dictionary=self.d, fast=self.fast, fast_sim=self.fast_sim.where,
-                seed=self.seed, speed=self.speed,
+                seed=self.seed, speed=self.speed, listen=self.sim_listen,
                 generator=wants_simulated_generator(self.generator_spec, inertial=self.testbed.inertial))
             address, resource = self._local.address, self._local.fg_resource
         else:

@@ -303,6 +303,7 @@ def test_the_cli_choices_are_the_analysis_ones():
     assert cli_analysis.METRICS == log_metrics.METRICS
     assert cli_analysis.SENSORS == log_metrics.SENSORS
     assert cli_analysis.SENSORS[0] == log_metrics.DEFAULT_SENSOR
+    assert cli_analysis.AUTO_SENSOR == log_metrics.AUTO_SENSOR
 
 
 def test_a_sensor_that_never_moves_is_not_scored_as_perfect(tmp_path):
@@ -319,6 +320,10 @@ def test_a_sensor_that_never_moves_is_not_scored_as_perfect(tmp_path):
                and "--sensor encoder_inner" in n for n in m.notes)
     inner = analyze_log(log, sensor="encoder_inner")
     assert inner.jitter is not None and inner.jitter.std_rad > 0
+    # "auto" (the command line's default) picks the relative set-up's sensor by itself
+    auto = analyze_log(log, sensor=log_metrics.AUTO_SENSOR)
+    assert auto.sensor == "encoder_inner" and auto.jitter == inner.jitter
+    assert main(["analyze", str(log), "--json"]) == 0
 
 
 # ---------------------------------------------------------------------- validity

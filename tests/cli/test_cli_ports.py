@@ -120,3 +120,36 @@ def test_the_simulator_child_on_a_taken_port_says_so(taken_port):
     assert str(err.value).startswith(f"the simulated testbed cannot listen on 127.0.0.1:{taken_port}: "
                                      "the port (TCP, or the UDP port of the same number its telemetry "
                                      "leaves from) is in use by another program - choose another port")
+
+
+# ---------------------------------------------------------------- through the commands
+def test_monitor_starts_the_simulator_on_the_chosen_port(capsys):
+    from groundstation.cli.main import main
+    port = free_port()
+    assert main(["monitor", "--device", "sim", "--sim-port", str(port), "--duration", "0.5"]) == 0
+    assert f"started the simulated testbed on tcp://127.0.0.1:{port}" in capsys.readouterr().out
+
+
+def test_a_command_on_a_taken_simulator_port_exits_2_naming_it(taken_port, capsys):
+    from groundstation.cli.main import main
+    code = main(["params", "show", "--device", "sim", "--sim-port", str(taken_port)])
+    err = capsys.readouterr().err
+    assert code == EXIT_CANNOT_START and str(taken_port) in err
+
+
+def test_a_chosen_port_with_the_fast_simulator_is_refused(tmp_path, capsys):
+    """The fast simulator is the campaign's own, on a private link: a port for it would be
+    a promise nobody keeps."""
+    from pathlib import Path
+    from groundstation.cli.main import main
+    campaign = Path(__file__).resolve().parents[2] / "profiles/campaigns/relative_steps.toml"
+    code = main(["campaign", "run", str(campaign), "--device", "sim", "--fast", "--sim-port",
+                 str(free_port()), "--log-folder", str(tmp_path), "--no-analysis"])
+    assert code == EXIT_CANNOT_START
+    assert "--sim-port" in capsys.readouterr().err
+
+
+def test_cluster_ports_with_the_serial_loop_are_refused(tmp_path, capsys):
+    from groundstation.cli.main import main
+    code = main(["analyze", str(tmp_path), "--serial", "--scheduler-port", "0"])
+    assert code == 2 and "for the local cluster" in capsys.readouterr().err
