@@ -15,8 +15,11 @@ from groundstation.link import open_client
 from groundstation.sim import SimulatedDevice
 
 
-def wait_for(predicate, timeout: float = 5.0, interval: float = 0.005):
-    """Poll until predicate() is true; bounded, so a broken link fails instead of hanging."""
+def wait_for(predicate, timeout: float = 30.0, interval: float = 0.005):
+    """Poll until predicate() is true; bounded, so a broken link fails instead of hanging.
+    The bound is a hang guard, not a speed requirement: generous, because a machine with
+    both cores saturated by other work (make test-stressed) can hold a receiving thread
+    off the CPU for seconds (5 s was too short for a loopback event at load 8)."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
         value = predicate()
