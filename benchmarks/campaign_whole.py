@@ -20,6 +20,7 @@ before, as the limit.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -57,12 +58,10 @@ def _cpu_and_kind(pid: int) -> tuple[float, str] | None:
 
 def _children(pid: int) -> list[int]:
     out = []
-    try:
+    # a process that ended meanwhile has no children to list: none
+    with contextlib.suppress(OSError):
         for task in Path(f"/proc/{pid}/task").iterdir():
-            text = (task / "children").read_text().split()
-            out += [int(p) for p in text]
-    except OSError:
-        pass
+            out += [int(p) for p in (task / "children").read_text().split()]
     return out
 
 

@@ -18,6 +18,7 @@ connection, which security mechanism it speaks.
 
 from __future__ import annotations
 
+import contextlib
 import socket
 import time
 from urllib.parse import urlsplit
@@ -150,10 +151,9 @@ class HandshakeWatch:
                 f"{mechanism or 'no ZeroMQ greeting'}): is it a station's publisher?"), False
 
     def close(self) -> None:
-        try:
+        # the socket may already be closing: then there is no monitor left to stop
+        with contextlib.suppress(Exception):
             self._sock.disable_monitor()
-        except Exception:            # noqa: BLE001 - the socket may already be closing
-            pass
         self.monitor.close(linger=0)
 
 
