@@ -304,13 +304,19 @@ class ParameterLoader:
 
     def __init__(self, client: DeviceLink, dictionary: Dictionary, history: ParameterHistory | None = None,
                  journal: Callable[[str, dict, bytes], None] | None = None,
-                 active_table_seen: Callable[[], tuple[int, int] | None] | None = None):
+                 active_table_seen: Callable[[], tuple[int, int] | None] | None = None,
+                 reports_between_steps: bool = True):
         self.client = client
         #: (version, CRC) of the active table from the HOUSEKEEPING a subscriber of this
         #: link saw last, or None: spares waiting for the next report before an upload -
         #: which on a simulated device held between steps (fast campaigns) never comes,
         #: so each upload used to wait out HOUSEKEEPING_WAIT_S of wall time for it
         self.active_table_seen = active_table_seen
+        #: False: the device's time stands still until a command moves it (a simulated
+        #: device held between steps), so no HOUSEKEEPING comes on its own - an upload
+        #: that has seen none does not wait for one (the device then runs its first table,
+        #: version 0, as a simulated device does from its start)
+        self.reports_between_steps = reports_between_steps
         self.d = dictionary
         #: every device's uploads; `history` is the part of this loader's device
         self.store = history if history is not None else MemoryHistory()
@@ -387,8 +393,10 @@ class ParameterLoader:
             seen = self.active_table_seen() if self.active_table_seen is not None else None
             if seen is not None and seen[1] == previous.crc:
                 active_version = seen[0]
-            else:
+            elif self.reports_between_steps:
                 active_version = waiter.wait_any(HOUSEKEEPING_WAIT_S)
+            else:
+                active_version = 0
             version = ((active_version or 0) + 1) & 0xFFFF or 1
             self._command("PARAM_BEGIN", table_version=version, table_length=len(blob))
             for off in range(0, len(blob), self.write_block):

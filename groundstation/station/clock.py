@@ -90,6 +90,9 @@ class WallClock:
     """Real time: the device runs by itself."""
 
     fast = False
+    #: device time passes between the script's steps: periodic reports (HOUSEKEEPING)
+    #: keep coming, so waiting for the next one is waiting for something
+    time_flows_between_steps = True
 
     def __init__(self, client: DeviceLink, abort: threading.Event):
         self.client = client
@@ -137,6 +140,7 @@ class SteppedClock:
         self.abort = abort
         self.pacing = pacing or FastPacing()
         self.between_steps = between_steps
+        self.time_flows_between_steps = between_steps != BetweenSteps.HELD
         #: the recorder's queue fill (0..1), or None when nothing records
         self.recorder_backlog = recorder_backlog
         self.rate = device.dictionary.control_rate_hz

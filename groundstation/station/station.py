@@ -348,7 +348,8 @@ class Station:
         if self.history is None:
             self.history = MemoryHistory()
         return ParameterLoader(self.client, self.d, self.history, journal=self._journal,
-                               active_table_seen=lambda: self.state.active_table)
+                               active_table_seen=lambda: self.state.active_table,
+                               reports_between_steps=self.clock.time_flows_between_steps)
 
     def read_params(self, progress: Callable[[str, float], None] | None = None):
         """The device's active table (ActiveTable: bytes, CRC, values)."""
@@ -497,9 +498,8 @@ class Station:
     def start_recording(self, name: str, notes: str = "") -> Path:
         if self.recording.active:
             raise ScriptError(f"start_recording '{name}': '{self.recorder.test_name}' is still recording")
-        # the fast simulator delivers thousands of frames a flush: larger chunks, fewer
-        # of them, for the log writer, whose process yields a contended core to the
-        # simulator (logs/schema.py, FAST_CHUNK_ROWS, FAST_WRITER_NICENESS)
+        # the fast simulator delivers thousands of frames a flush: larger chunks for the log
+        # writer, whose process yields a contended core to it (logs/schema.py FAST_*)
         fast = isinstance(self.clock, SteppedClock)
         path = self.recording.start(self.client, self.d, self.testbed, self.log_folder, name, notes,
                                     chunk_rows=FAST_CHUNK_ROWS if fast else None,
@@ -508,7 +508,7 @@ class Station:
             self.recording.journal("testbed", device_record(
                 self.device_spec == SIMULATED_DEVICE, address=self.address, seed=self.seed, fast=fast,
                 speed=self.speed))
-        if isinstance(self.clock, SteppedClock):
+        if fast:
             self.clock.tick_over()          # held device time: the log opens with telemetry
         return path
 
