@@ -276,21 +276,26 @@ def _say_failures(reasons: list[tuple[str, str]], total: int, detailed: bool) ->
         print(f"{head}: {', '.join(log for log, _ in reasons)} (why: above)", file=sys.stderr)
 
 
+def _batch_options_problem(args, scheduler: str) -> str:
+    """What contradicts itself in a batch's options ("" when nothing)."""
+    for flag, given in (("--plot", args.plot), ("--slope-table", args.slope_table)):
+        if given:
+            return f"{flag} is for single logs, not with --table/--scheduler/--workers/--serial"
+    if args.serial and args.scheduler not in (None, "none"):
+        return f"--serial and --scheduler {args.scheduler}: choose one"
+    if scheduler != "local" and (args.scheduler_port or args.dashboard):
+        return (f"--scheduler-port and --dashboard are for the local cluster this command "
+                f"starts, not with --scheduler {scheduler}")
+    return ""
+
+
 def _cmd_batch(args) -> int:
     """Many logs as one table: one Dask task per log (analysis/batch_dask.py), or the same
     task in a loop here (--serial); rows in the order of the sorted paths."""
-    for flag, given in (("--plot", args.plot), ("--slope-table", args.slope_table)):
-        if given:
-            print(f"error: {flag} is for single logs, not with --table/--scheduler/--workers/"
-                  f"--serial", file=sys.stderr)
-            return 2
     scheduler = "none" if args.serial else (args.scheduler or "local")
-    if args.serial and args.scheduler not in (None, "none"):
-        print(f"error: --serial and --scheduler {args.scheduler}: choose one", file=sys.stderr)
-        return 2
-    if scheduler != "local" and (args.scheduler_port or args.dashboard):
-        print(f"error: --scheduler-port and --dashboard are for the local cluster this command "
-              f"starts, not with --scheduler {scheduler}", file=sys.stderr)
+    problem = _batch_options_problem(args, scheduler)
+    if problem:
+        print(f"error: {problem}", file=sys.stderr)
         return 2
     from ..analysis.batch import (TABLE_KEYS, BatchOptions, campaign_reports, default_workers,
                                   find_logs, run_serial)

@@ -62,8 +62,7 @@ def add_parsers(sub) -> argparse._SubParsersAction:
                                   "       off), the run's log closed with the reason; continue\n"
                                   "       with --resume REPORT.json")
     s.add_argument("file")
-    # device, fast, fast-sim, seed, testbed, log folder: None when not typed, so that a
-    # resume can take the report's own (campaign/run_setup.py) and see a contradiction
+    # device ... log folder: None when not typed (a resume takes the report's own: run_setup.py)
     s.add_argument("--device", default=None, help="sim (default) | tcp://HOST:PORT | serial://PORT?baud=N")
     add_sim_port_option(s)
     s.add_argument("--fast", action="store_true", default=None,
@@ -143,6 +142,11 @@ def _cmd_show(args) -> int:
     print("checked: every value is within the protocol's, the testbed's and the generator's "
           "limits, and every referenced file loads")
     return EXIT_OK
+
+
+def _refused(why: str) -> int:
+    print(f"error: {why}", file=sys.stderr)
+    return EXIT_MALFORMED
 
 
 def _print_problems(exc: GroundStationError) -> None:
@@ -227,10 +231,8 @@ def _cmd_run(args) -> int:
         _print_problems(exc)
         return EXIT_MALFORMED
     if setup["fast"] and args.sim_port is not None:
-        print("error: --sim-port is for the real-time simulator: with --fast the simulator is "
-              "this campaign's own, on a private link - leave out one or the other",
-              file=sys.stderr)
-        return EXIT_MALFORMED
+        return _refused("--sim-port is for the real-time simulator: with --fast the simulator "
+                        "is this campaign's own, on a private link - leave out one or the other")
     for note in notes:
         print(note, flush=True)
     folder = Path(setup["log_folder"] or Path("logs") / c.name)
