@@ -39,7 +39,7 @@ from collections import Counter
 from pathlib import Path
 
 from campaign_whole import print_whole, whole
-from common import machine, save
+from common import machine, save, stat_cpu_seconds
 
 from groundstation import Testbed
 from groundstation.station.clock import ONE_CHUNK_IN_FLIGHT, FastPacing
@@ -71,11 +71,7 @@ def simulator_alone(seconds: float) -> tuple[float, float]:
 
 def _cpu_of(stat: Path) -> float:
     """utime + stime of a /proc stat file, s (0 when it cannot be read)."""
-    try:
-        fields = stat.read_text().rsplit(")", 1)[1].split()
-        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-    except (OSError, IndexError, ValueError):
-        return 0.0
+    return stat_cpu_seconds(stat) or 0.0
 
 
 class _Timers:

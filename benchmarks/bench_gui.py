@@ -62,6 +62,7 @@ import PySide6
 from PySide6.QtCore import QEventLoop, QObject, QSettings, Qt, QTimer
 from PySide6.QtWidgets import QApplication
 
+from common import proc_cpu_seconds
 from gui_report import before_after, print_table
 
 from groundstation.core.dictionary import load_dictionary
@@ -85,13 +86,6 @@ _interrupted = False
 
 
 # ---------------------------------------------------------------------- helpers
-def proc_cpu_seconds(pid: int) -> float | None:
-    try:
-        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    except OSError:
-        return None
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
 
 def self_cpu_seconds() -> float:
     r = resource.getrusage(resource.RUSAGE_SELF)

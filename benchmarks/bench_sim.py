@@ -24,7 +24,6 @@ Run: .venv/bin/python benchmarks/bench_sim.py [--paced-seconds 60] [--speed-seco
 from __future__ import annotations
 
 import argparse
-import os
 import threading
 import time
 import zlib
@@ -33,7 +32,7 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-from common import machine, save
+from common import machine, proc_cpu_seconds, save
 from groundstation.codec.frames import encode_items
 from groundstation.core.dictionary import load_dictionary
 from groundstation.link import open_client
@@ -121,9 +120,6 @@ def fast_mode(d, seconds: float) -> dict:
             "fast_bytes_per_sim_s": nbytes[0] / seconds}
 
 
-def proc_cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def paced_mode(d, seconds: float) -> dict:

@@ -31,18 +31,20 @@ import time
 from collections import Counter, defaultdict
 from pathlib import Path
 
+from common import proc_cpu_seconds
+
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE_S = 0.05          # how often the process tree's CPU is read
 
 
 def _cpu_and_kind(pid: int) -> tuple[float, str] | None:
+    cpu = proc_cpu_seconds(pid)
     try:
-        stat = Path(f"/proc/{pid}/stat").read_text()
         cmd = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
     except OSError:
         return None
-    fields = stat.rsplit(")", 1)[1].split()
-    cpu = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    if cpu is None:
+        return None
     if "resource_tracker" in cmd:
         kind = "multiprocessing resource tracker"
     elif "spawn_main" in cmd:
