@@ -221,7 +221,8 @@ def main() -> dict:
     print(f"fast mode, 2-DOF inertial, DB-DHM, 3 x 12-section cascades, compensation on "
           f"({args.fast_seconds:g} s simulated):")
     print(f"  core (no encoding)   {res['fast_core_x_realtime']:8.0f} x real time")
-    print(f"  frames to consumer   {res['fast_frames_x_realtime']:8.0f} x real time")
+    print(f"  frames to consumer   {res['fast_frames_x_realtime']:8.0f} x real time   -> "
+          f"{res['fast_frames_x_realtime'] / res['fast_core_x_realtime']:.2f} of the core")
     print(f"  target                     50 x real time   -> frames/target = "
           f"{res['fast_frames_x_realtime'] / 50:.1f}")
     if args.paced_seconds > 0:

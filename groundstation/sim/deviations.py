@@ -70,8 +70,9 @@ class Deviations:
     def connect_ignores_owner(self) -> bool:
         return "foreign-host" in self.names
 
-    def outgoing(self, frames: list[bytes]) -> list[bytes]:
-        """Telemetry frames as this device sends them (one frame per element)."""
+    def outgoing(self, frames):
+        """Telemetry frames (a list, or a FrameRun) as this device sends them: as given,
+        or a list of the changed frames."""
         if "crc-range" not in self.names:
             return frames
         return [_crc_over_wrong_range(f) for f in frames]

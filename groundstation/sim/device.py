@@ -26,6 +26,7 @@ from ..link.transports import StreamTransport, TcpStream, listening_socket
 from . import core
 from .deviations import Deviations
 from .firmware import REJECTED, Firmware
+from .telemetry_batch import FrameRun, TelemetryBatcher
 from ..plant.testbed import Testbed
 
 log = logging.getLogger(__name__)
@@ -165,6 +166,7 @@ class SimulatedDevice:
         self._confirmed_in_hk = frozenset(self.dictionary.command(name).opcode
                                           for name in CONFIRMED_IN_HOUSEKEEPING)
         self._response_layout = _response_struct(self.dictionary)
+        self._batcher = TelemetryBatcher(self.codec, self.housekeeping_divider)
         self.tcp_port: int | None = None
         self._t0: float | None = None
         self._ticks_done = 0
@@ -364,16 +366,19 @@ class SimulatedDevice:
             return ("udp", (conn.peer_ip, port))
         return ("stream", conn)
 
-    def _send_telemetry(self, frames: list[bytes], frame_groups: bool,
+    def _send_telemetry(self, frames: list[bytes] | FrameRun, frame_groups: bool,
                         group: int | None = None) -> None:
         target = self._telemetry_target()
-        if target is None or not frames:
+        if target is None or not len(frames):
             return
         frames = self.firmware.deviations.outgoing(frames)
         if target[0] == "stream":
-            target[1].send(b"".join(frames))
+            target[1].send(frames.data if isinstance(frames, FrameRun) else b"".join(frames))
             return
         step = (group or self.frames_per_datagram) if frame_groups else 1
+        if isinstance(frames, FrameRun):
+            self._send_datagrams(target[1], frames.groups(step))
+            return
         self._send_datagrams(target[1], (b"".join(frames[i:i + step])
                                          for i in range(0, len(frames), step)))
 
@@ -444,8 +449,8 @@ class SimulatedDevice:
             if target is not None and target[0] == "udp" and datagram_bytes:
                 # these packed too: every datagram is a send here and a receive in the
                 # host, and each of those lets another thread take the interpreter
-                self._send_datagrams(target[1], _packed(events + hk_frames, datagram_bytes))
-                group = max(1, datagram_bytes // len(frames[0])) if frames else 1
+                self._send_datagrams(target[1], _packed(events + hk_frames.frames(), datagram_bytes))
+                group = max(1, datagram_bytes // frames.size) if len(frames) else 1
                 self._send_telemetry(frames, frame_groups=True, group=group)
             elif target is not None:
                 self._send_telemetry(events, frame_groups=False)
@@ -488,39 +493,13 @@ class SimulatedDevice:
             if fw.session_token is not None:
                 fw.fw[core.FW_LAST_HEARD] = fw.tick
 
-    def _simulate(self, n: int, encode: bool = True) -> tuple[list[bytes], list[bytes]]:
-        """n periods -> HIGH_RATE frames (one per period) and HOUSEKEEPING frames (10 Hz).
-
-        The batch is cut at housekeeping boundaries so each HOUSEKEEPING frame carries
-        the state of its own tick: batch sizes never change what is sent.  With `encode`
-        False (nobody to send them to) the periods run but no frame is made: nothing is
-        encoded for nobody, and no sequence number is used up (SPEC §2)."""
-        fw = self.firmware
-        every = self.housekeeping_divider
-        hr = self.dictionary.packet("HIGH_RATE")
-        frames: list[bytes] = []
-        hk_frames: list[bytes] = []
-        done = 0
-        while done < n:
-            step = min(n - done, every - fw.tick % every)
-            first_tick = fw.tick + 1
-            v_fg = self.base_drive(first_tick, step) if self.base_drive is not None else None
-            cols, truth = fw.run(step, v_fg)
-            if self.truth_sink is not None:
-                self.truth_sink(first_tick, truth)
-            done += step
-            if not encode:
-                continue
-            seq = self._seq["HIGH_RATE"]
-            self._seq["HIGH_RATE"] = (seq + step) & 0xFFFFFFFF
-            data = self.codec.encode(hr, cols, np.arange(seq, seq + step),
-                                     np.arange(first_tick, first_tick + step))
-            size = len(data) // step
-            frames += [data[i * size:(i + 1) * size] for i in range(step)]
-            if fw.tick % every == 0:
-                hk_frames.append(self.codec.encode(
-                    "HOUSEKEEPING", fw.housekeeping(), [self._next_seq("HOUSEKEEPING")], [fw.tick]))
-        return frames, hk_frames
+    def _simulate(self, n: int, encode: bool = True) -> tuple[FrameRun, FrameRun]:
+        """n periods -> HIGH_RATE frames (one per period) and HOUSEKEEPING frames (10 Hz),
+        each encoded in one pass (telemetry_batch.py); batch sizes never change what is
+        sent.  With `encode` False (nobody to send them to) the periods run but no frame
+        is made: nothing is encoded for nobody, and no sequence number is used up (SPEC §2)."""
+        return self._batcher.run(self.firmware, n, self._seq, encode=encode,
+                                 base_drive=self.base_drive, truth_sink=self.truth_sink)
 
     def run_fast(self, seconds: float, consumer: Callable[[bytes], None],
                  batch: int | None = None) -> int:
@@ -536,7 +515,7 @@ class SimulatedDevice:
             with self._lock:
                 frames, hk_frames = self._simulate(n)
                 events = self._event_frames()
-            consumer(b"".join(frames) + b"".join(hk_frames) + b"".join(events))
+            consumer(frames.data + hk_frames.data + b"".join(events))
             done += n
         return done
 

@@ -134,12 +134,18 @@ class Engine:
         self.fw[core.FW_PROF_TARGET] = target
 
     # ------------------------------------------------------------------ running
-    def run(self, n: int, v_fg: np.ndarray | None = None) -> tuple[dict[str, np.ndarray], np.ndarray, list[tuple[int, int]]]:
-        """n control periods -> (HIGH_RATE columns, truth array (n, 6), events [(tick, code)])."""
+    def run(self, n: int, v_fg: np.ndarray | None = None, out: np.ndarray | None = None,
+            ) -> tuple[dict[str, np.ndarray] | None, np.ndarray, list[tuple[int, int]]]:
+        """n control periods -> (HIGH_RATE columns, truth array (n, 6), events [(tick, code)]).
+        `out`: an (n, N_OUT) array to write the outputs into (a slice of a caller's
+        larger batch, who makes the columns of the whole with `columns`); then the
+        columns returned are None."""
         noise = self._rng.standard_normal((n, core.N_NOISE))
         if v_fg is None:
             v_fg = np.zeros(n)
-        out = np.empty((n, core.N_OUT))
+        given = out is not None
+        if not given:
+            out = np.empty((n, core.N_OUT))
         truth = np.empty((n, core.N_TRUTH))
         n_ev = core.run_ticks(n, self.x, self.model.Ad, self.model.Bd, self.k, self.fw,
                               self.fstate, self.fstack, self.flut_x, self.flut_y, self.fparams,
@@ -147,12 +153,17 @@ class Engine:
                               self.sos, self.zs, self.zs_new, self.gbuf, self.gpos, self.profile,
                               noise, np.ascontiguousarray(v_fg, dtype=np.float64), out, truth,
                               self.events)
+        events = [(int(t), int(c)) for t, c in self.events[:n_ev]]
+        return (None if given else self.columns(out)), truth, events
+
+    @staticmethod
+    def columns(out: np.ndarray) -> dict[str, np.ndarray]:
+        """(n, N_OUT) outputs -> HIGH_RATE columns by name (views; status flags as bool)."""
         cols = {name: out[:, i] for i, name in enumerate(core.OUT_COLUMNS)}
         for flag in ("armed", "coarse_saturated", "fine_saturated", "profile_active",
                      "friction_comp_on", "fault"):
             cols[flag] = cols[flag] > 0.5
-        events = [(int(t), int(c)) for t, c in self.events[:n_ev]]
-        return cols, truth, events
+        return cols
 
     @property
     def tick(self) -> int:

@@ -452,11 +452,13 @@ class Firmware:
         core.EV_PROFILE_DONE: ("INFO", "PROFILE_FINISHED", "profile finished"),
     }
 
-    def run(self, n: int, v_fg: np.ndarray | None = None) -> tuple[dict[str, Any], np.ndarray]:
-        """n control periods -> HIGH_RATE columns (engineering units) and the truth array."""
+    def run(self, n: int, v_fg: np.ndarray | None = None,
+            out: np.ndarray | None = None) -> tuple[dict[str, Any], np.ndarray]:
+        """n control periods -> HIGH_RATE columns (engineering units) and the truth array
+        (`out`: where to write the outputs, see Engine.run; the columns are then None)."""
         plant_overflows = self.engine.fstate[fr.S_OVERFLOW]
         comp_overflows = self.engine.cstate[fr.S_OVERFLOW]
-        cols, truth, events = self.engine.run(n, v_fg)
+        cols, truth, events = self.engine.run(n, v_fg, out)
         if self.engine.fstate[fr.S_OVERFLOW] > plant_overflows:
             self._emit("WARNING", "SIMULATOR", "bearing friction model: reversal stack overflowed "
                        "and was reset (more nested reversals than its capacity)")
