@@ -1,13 +1,14 @@
-"""The batch of batch.py on Dask: one task per log, on local worker processes or on a
-dask.distributed cluster.
+"""The batch of batch.py on Dask: the logs in a few groups of about equal size, one task
+per group, on local worker processes or on a dask.distributed cluster.
 
     rows = run_dask(paths, BatchOptions(), scheduler="local", workers=2, progress=show)
     rows = run_dask(paths, BatchOptions(), scheduler="tcp://head:8786")
 
-Each task is `batch.analyze_one(path, options, identity)`: the worker opens the log
-itself (a path travels, never the data), so a remote cluster needs the logs on a file
-system its workers share with this host, under the same paths.  A row comes back (a
-few hundred bytes), in the order of `paths` whatever order the tasks finish in.
+A task runs `batch.analyze_one(path, options, identity)` for each log of its group: the
+worker opens the log itself (a path travels, never the data), so a remote cluster needs
+the logs on a file system its workers share with this host, under the same paths.  Rows
+come back (a few hundred bytes each), in the order of `paths` whatever order the tasks
+finish in.
 
 Why processes and one thread each: the work is numpy, scipy and HDF5 decompression,
 and HDF5 (h5py) holds a global lock, so threads of one process would mostly wait for
@@ -20,6 +21,7 @@ from __future__ import annotations
 
 import contextlib
 import logging
+import os
 import uuid
 from pathlib import Path
 from typing import Any, Callable, Iterator
@@ -95,38 +97,127 @@ def _joined(host: str, port: int) -> str:
     return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
 
 
+#: the cost model behind choosing the serial loop for a small batch (local_cluster_pays),
+#: from bench_batch.py on a 2-core machine (docs/scale.md, "When Dask pays"): the serial
+#: task's seconds per log and per MB of log, and a local cluster's start (scheduler and
+#: worker processes up, the analysis imported in each)
+SERIAL_S_PER_LOG = 0.035
+SERIAL_S_PER_MB = 0.0038
+CLUSTER_START_S = 1.5
+CLUSTER_START_S_PER_WORKER = 1.5
+
+
+def local_cluster_pays(sizes: list[int], workers: int) -> tuple[bool, float, float]:
+    """(does a local cluster of `workers` finish before the serial loop would, the serial
+    loop's estimated seconds, the cluster's estimated seconds including its start) for
+    logs of `sizes` bytes.  One worker never pays: it is the serial loop plus a start."""
+    serial = sum(SERIAL_S_PER_LOG + SERIAL_S_PER_MB * b / 1e6 for b in sizes)
+    cores = min(workers, os.cpu_count() or 1)
+    cluster = CLUSTER_START_S + CLUSTER_START_S_PER_WORKER * workers + serial / max(1, cores)
+    return workers > 1 and cores > 1 and cluster < serial, serial, cluster
+
+
+#: tasks per worker: enough that a worker finishing its share early finds another
+#: (logs differ in length), few enough that the per-task cost is paid a handful of times
+TASKS_PER_WORKER = 4
+
+
+def log_groups(sizes: list[int], groups: int) -> list[list[int]]:
+    """Indices 0..len(sizes)-1 in `groups` groups (fewer if there are fewer logs) of
+    about equal total size: the largest log first, each to the lightest group so far
+    (longest-processing-time first; the work of a log grows with its bytes).  Each group
+    is in index order, the groups in order of their first index."""
+    groups = max(1, min(groups, len(sizes)))
+    load = [0] * groups
+    members: list[list[int]] = [[] for _ in range(groups)]
+    for i in sorted(range(len(sizes)), key=lambda i: (-sizes[i], i)):
+        g = min(range(groups), key=lambda g: (load[g], g))
+        members[g].append(i)
+        load[g] += max(1, sizes[i])
+    return sorted((sorted(m) for m in members if m), key=lambda m: m[0])
+
+
+def analyze_group(paths: list[str], options: BatchOptions,
+                  known: list[dict[str, Any] | None]) -> list[dict[str, Any]]:
+    """One task: the rows of a group of logs, one after the other in the worker (each by
+    analyze_one, which never raises).  A task per log cost the driver and the worker
+    about 26 ms of CPU each (docs/scale.md): paid once per group now."""
+    return [analyze_one(p, options, k) for p, k in zip(paths, known)]
+
+
+def _cluster_workers(scheduler_client) -> int:
+    try:
+        return max(1, len(scheduler_client.scheduler_info().get("workers", {})))
+    except Exception:                                  # noqa: BLE001 (an odd scheduler: guess)
+        return 1
+
+
 def run_on(scheduler_client, paths: list[Path], options: BatchOptions = BatchOptions(),
            known: dict[str, dict[str, Any]] | None = None,
-           progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
+           progress: Callable[[int, int], None] | None = None,
+           tasks: int | None = None) -> list[dict[str, Any]]:
     """Every log's row, computed by the workers behind `scheduler_client` (a
-    dask.distributed.Client), in the order of `paths`;
-    `progress(done, total)` after each log."""
+    dask.distributed.Client), in the order of `paths`; the logs go in `tasks` groups of
+    about equal size (None: TASKS_PER_WORKER per worker).  `progress(done, total)` as
+    groups finish.  A group whose worker died is run again a log per task, so one log
+    that kills its worker costs its own row only."""
+    known = known or {}
+    sizes = [_size(p) for p in paths]
+    groups = log_groups(sizes, tasks or TASKS_PER_WORKER * _cluster_workers(scheduler_client))
+    rows: list[dict[str, Any] | None] = [None] * len(paths)
+    done = [0]
+
+    def finished(members: list[int], result: list[dict[str, Any]]) -> None:
+        for i, row in zip(members, result):
+            rows[i] = row
+        done[0] += len(members)
+        if progress is not None:
+            progress(done[0], len(paths))
+    failed = _run_groups(scheduler_client, paths, options, known, groups, finished)
+    if failed:                  # again, a log a task: find the log that kills a worker
+        still = _run_groups(scheduler_client, paths, options, known,
+                            [[i] for g in failed for i in g[0]], finished)
+        for members, why in still:
+            finished(members, [error_row(paths[members[0]], why)])
+    return rows                                   # type: ignore[return-value]
+
+
+def _run_groups(scheduler_client, paths, options, known, groups: list[list[int]],
+                finished) -> list[tuple[list[int], str]]:
+    """Submit one task per group; hand each finished group's rows to `finished`; return
+    the groups whose task failed, with why."""
     from dask.distributed import as_completed
 
-    known = known or {}
     # keys unique to this call: on a shared cluster another user's batch of the same
     # file names must not be taken for ours
     token = uuid.uuid4().hex[:8]
-    # positional iterables are mapped element by element (keywords would be broadcast)
-    futures = scheduler_client.map(analyze_one, [str(p) for p in paths], [options] * len(paths),
-                         [known.get(str(p)) for p in paths],
-                         key=[f"analyze-log-{token}-{i}-{Path(p).name}" for i, p in enumerate(paths)],
-                         pure=False)
-    index = {f.key: i for i, f in enumerate(futures)}
-    rows: list[dict[str, Any] | None] = [None] * len(paths)
-    for done, future in enumerate(as_completed(futures), 1):
-        i = index[future.key]
+    futures = {}
+    for members in groups:
+        first = Path(paths[members[0]]).name
+        future = scheduler_client.submit(
+            analyze_group, [str(paths[i]) for i in members], options,
+            [known.get(str(paths[i])) for i in members],
+            key=f"analyze-logs-{token}-{members[0]}-{len(members)}-{first}", pure=False)
+        futures[future.key] = (future, members)
+    failed = []
+    for future in as_completed([f for f, _ in futures.values()]):
+        members = futures[future.key][1]
         if future.status == "finished":
-            rows[i] = future.result()
+            finished(members, future.result())
         else:
-            # analyze_one does not raise: this is a worker that died on the log (HDF5
-            # crashing the process) or a cluster that went away; the log gets a row
+            # analyze_one does not raise: this is a worker that died on a log (HDF5
+            # crashing the process) or a cluster that went away
             exc = future.exception()
-            rows[i] = error_row(paths[i], f"task failed: {type(exc).__name__}: {exc}")
+            failed.append((members, f"task failed: {type(exc).__name__}: {exc}"))
         future.release()                          # its result is ours now: free the worker
-        if progress is not None:
-            progress(done, len(paths))
-    return rows                                   # type: ignore[return-value]
+    return failed
+
+
+def _size(path: Path) -> int:
+    try:
+        return Path(path).stat().st_size
+    except OSError:
+        return 0
 
 
 def run_dask(paths: list[Path], options: BatchOptions = BatchOptions(),
@@ -138,4 +229,4 @@ def run_dask(paths: list[Path], options: BatchOptions = BatchOptions(),
         return run_on(client, paths, options, known, progress)
 
 
-__all__ = ["dask_client", "run_dask", "run_on"]
+__all__ = ["analyze_group", "dask_client", "local_cluster_pays", "log_groups", "run_dask", "run_on"]

@@ -143,15 +143,17 @@ def add_parsers(sub) -> None:
     b = s.add_argument_group(
         "many logs (a table, on Dask)",
         "With --table, --scheduler, --workers or --serial the logs are analysed as a\n"
-        "batch: one task per log on Dask worker processes (or one after the other with\n"
-        "--serial), one row per log with its campaign, design, base motion and seed, a\n"
-        "progress bar on stderr; a log that cannot be read is a row with its error.\n"
+        "batch: in a few tasks on Dask worker processes (or one after the other with\n"
+        "--serial, which is also chosen, and said, when a local cluster would take longer\n"
+        "than the loop), one row per log with its campaign, design, base motion and seed,\n"
+        "a progress bar on stderr; a log that cannot be read is a row with its error.\n"
         "See docs/analysis.md, 'Many logs'.")
     b.add_argument("--table", default=None, metavar="OUT",
                    help="write the table to OUT.parquet and OUT.csv (only one of them if OUT "
                         "ends in .parquet or .csv)")
     b.add_argument("--scheduler", type=_scheduler, default=None, metavar="local|none|tcp://HOST:8786",
-                   help="local: worker processes on this host (default for a batch); none: a "
+                   help="local: worker processes on this host (default for a batch big enough "
+                        "to pay for starting them); none: a "
                         "serial loop in this process; tcp://HOST:8786: a dask.distributed "
                         "cluster whose workers see the logs under the same paths")
     b.add_argument("--workers", type=arguments.count, default=None, metavar="N",
@@ -327,6 +329,8 @@ def _cmd_batch(args) -> int:
     known, skipped = campaign_reports(paths)
     for report, why in skipped:            # a stray .json beside the logs costs a note
         print(f"note: skipped {report}: {why}", file=sys.stderr)
+    if _serial_is_quicker(args, paths):
+        scheduler = "none"
     progress = _ProgressBar(len(paths))
     if scheduler == "none":
         rows = run_serial(paths, options, known, progress)
@@ -365,6 +369,25 @@ def _cmd_batch(args) -> int:
     _say_failures([(r["log"], r["error"]) for r in failed], len(rows),
                   detailed=args.json or args.csv)
     return 1 if failed else 0
+
+
+def _serial_is_quicker(args, paths: list[Path]) -> bool:
+    """With no --scheduler, --workers, --serial or port asked for: would a local cluster
+    finish after the serial loop (its start is seconds)?  Then say so and use the loop."""
+    if args.scheduler or args.workers or args.serial or args.scheduler_port or args.dashboard:
+        return False
+    from ..analysis.batch import default_workers
+    from ..analysis.batch_dask import local_cluster_pays
+
+    sizes = [p.stat().st_size if p.exists() else 0 for p in paths]
+    workers = default_workers()
+    pays, serial_s, cluster_s = local_cluster_pays(sizes, workers)
+    if pays:
+        return False
+    print(f"{len(paths)} logs ({sum(sizes) / 1e6:.0f} MB) analysed in this process: about "
+          f"{serial_s:.0f} s here against {cluster_s:.0f} s on a local Dask cluster of {workers} "
+          f"worker(s), its start included (--scheduler local to use it anyway)", file=sys.stderr)
+    return True
 
 
 class _ProgressBar:

@@ -210,8 +210,6 @@ def _cmd_run(args) -> int:
     from ..campaign.run_setup import resolve_setup
     from ..core.dictionary import load_dictionary
     from ..core.stop_request import InterruptMemory
-    from ..station.options import ConsolePublishing, FastSimOptions
-    from ..station.station import Station as Testbed
 
     given = {k: getattr(args, k) for k in ("device", "fast", "fast_sim", "seed", "testbed", "log_folder")
              if getattr(args, k) is not None}
@@ -240,21 +238,12 @@ def _cmd_run(args) -> int:
     report_path = Path(args.report or (args.resume if resume else folder / "report.json"))
     setup = {**setup, "testbed": str(Path(setup["testbed"]).resolve()) if setup["testbed"] else None,
              "log_folder": str(folder)}
-    operator = (lambda prompt: input(f"{prompt} - continue? [y/N] ").strip().lower() == "y") \
-        if sys.stdin.isatty() else None
-    generator = None if args.generator == GeneratorChoice.NONE else args.generator
     t0 = time.monotonic()
     report = None
     interrupted = False
     try:
-        fast = FastSimOptions(where=setup["fast_sim"]) if setup["fast"] else False
-        publishing = (ConsolePublishing(args.publish, curve_keys=args.curve_keys)
-                      if args.publish else None)
-        with InterruptMemory() as ctrl_c, \
-                Testbed(setup["device"], testbed=c.testbed, fast=fast, generator=generator,
-                        log_folder=folder, seed=setup["seed"], take_over=args.take_over,
-                        operator=operator, publishing=publishing, sim_listen=args.sim_port,
-                        echo=lambda text: print(f"    {text}", flush=True)) as tb:
+        tb = _campaign_testbed(args, c, setup, folder)
+        with InterruptMemory() as ctrl_c, tb:
             runner = CampaignRunner(c, tb, max_step_seconds=args.max_step_seconds,
                                     progress=_Progress(len(c.steps), ctrl_c.requested))
             report = runner.run(resume)
@@ -284,6 +273,29 @@ def _cmd_run(args) -> int:
     if report.status == "interrupted":
         return EXIT_INTERRUPTED
     return EXIT_OK if report.status == "completed" else EXIT_FAILED
+
+
+def _campaign_testbed(args, c, setup: dict, folder: Path):
+    """The campaign's Testbed (a Station), not yet opened."""
+    from ..station.options import ConsolePublishing, FastSimOptions
+    from ..station.station import Station as Testbed
+
+    operator = (lambda prompt: input(f"{prompt} - continue? [y/N] ").strip().lower() == "y") \
+        if sys.stdin.isatty() else None
+    generator = None if args.generator == GeneratorChoice.NONE else args.generator
+    fast = FastSimOptions(where=setup["fast_sim"]) if setup["fast"] else False
+    publishing = (ConsolePublishing(args.publish, curve_keys=args.curve_keys)
+                  if args.publish else None)
+    tb = Testbed(setup["device"], testbed=c.testbed, fast=fast, generator=generator,
+                 log_folder=folder, seed=setup["seed"], take_over=args.take_over,
+                 operator=operator, publishing=publishing, sim_listen=args.sim_port,
+                 echo=lambda text: print(f"    {text}", flush=True))
+    if sum(s.action == "start_recording" for s in c.steps) > 1:
+        # the first run's log writer does its imports while the device starts and
+        # connects, not in the first start_recording (CampaignRunner would start it only
+        # once connected)
+        tb.recording.prepare_ahead()
+    return tb
 
 
 def _write_metrics(report, report_path: Path, campaign, *, html_only: bool = False,

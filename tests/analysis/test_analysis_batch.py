@@ -7,6 +7,7 @@ their errors, and the CLI's Parquet and CSV must read back as that table."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
 from pathlib import Path
 
@@ -16,7 +17,8 @@ import pytest
 from groundstation import Testbed
 from groundstation.analysis.batch import (TABLE_KEYS, BatchOptions, analyze_one, campaign_index,
                                           find_logs, run_serial)
-from groundstation.analysis.batch_dask import run_dask
+from groundstation.analysis.batch_dask import (dask_client, local_cluster_pays, log_groups,
+                                               run_dask, run_on)
 from groundstation.analysis.batch_table import read_table, rows_frame, table_paths
 from groundstation.campaign import CampaignRunner, load_campaign
 from groundstation.cli.main import main
@@ -120,6 +122,56 @@ def test_the_local_cluster_gives_the_serial_table_exactly(serial_rows):
     assert [list(r) for r in dask_rows] == [TABLE_KEYS] * len(paths)
     pd.testing.assert_frame_equal(rows_frame(dask_rows, TABLE_KEYS), rows_frame(rows, TABLE_KEYS),
                                   check_exact=True)
+
+
+class _UnloadableInAWorker:
+    """Pickles to int('not a number'): a worker cannot load the task that carries it,
+    so the task fails there as a worker dying on a log would - with no flakiness."""
+
+    def __reduce__(self):
+        return int, ("not a number",)
+
+
+def test_logs_grouped_in_tasks_give_the_serial_table_and_a_failed_task_its_logs_only(serial_rows):
+    paths, rows = serial_rows
+    known = campaign_index(paths)
+    poisoned = {**known, str(paths[4]): _UnloadableInAWorker()}
+    seen: list[tuple[int, int]] = []
+    with dask_client("local", 2) as client:
+        grouped = run_on(client, paths, OPTIONS, known, tasks=2,
+                         progress=lambda done, total: seen.append((done, total)))
+        hit = run_on(client, paths, OPTIONS, poisoned, tasks=2)
+    assert len(seen) == 2 and seen[-1] == (len(paths), len(paths))      # a step per task
+    pd.testing.assert_frame_equal(rows_frame(grouped, TABLE_KEYS), rows_frame(rows, TABLE_KEYS),
+                                  check_exact=True)
+    # the failed group ran again a log a task: only the log that cannot run has no figures
+    assert hit[4]["error"].startswith("task failed: ") and hit[4]["path"] == str(paths[4])
+    pd.testing.assert_frame_equal(rows_frame(hit[:4], TABLE_KEYS), rows_frame(rows[:4], TABLE_KEYS),
+                                  check_exact=True)
+
+
+def test_log_groups_are_balanced_by_size_and_keep_every_log_once():
+    sizes = [90, 10, 10, 10, 40, 40, 5, 5, 60, 30]
+    groups = log_groups(sizes, 3)
+    assert sorted(i for g in groups for i in g) == list(range(len(sizes)))
+    loads = [sum(sizes[i] for i in g) for g in groups]
+    assert max(loads) - min(loads) <= max(sizes) and max(loads) <= 105      # total 300: 100 each
+    assert all(g == sorted(g) for g in groups) and [g[0] for g in groups] == sorted(g[0] for g in groups)
+    assert log_groups([7, 7], 8) == [[0], [1]]                              # never an empty task
+    assert log_groups([], 4) == []
+
+
+def test_the_serial_loop_is_chosen_and_said_when_a_cluster_would_not_pay(folder, capsys, tmp_path):
+    pays, serial_s, cluster_s = local_cluster_pays([10_000_000] * 5, workers=2)
+    assert not pays and serial_s < cluster_s
+    assert not local_cluster_pays([10_000_000] * 100_000, workers=1)[0]      # one worker: never
+    # a lab's year of 60 s logs on two workers pays wherever there are two cores
+    assert local_cluster_pays([10_000_000] * 6000, workers=2)[0] == ((os.cpu_count() or 1) > 1)
+    out = tmp_path / "small.csv"
+    assert main(["analyze", str(folder / "campaign"), "--table", str(out), *SENSOR]) == 0
+    err = capsys.readouterr().err
+    assert "2 logs (" in err and "analysed in this process" in err and "--scheduler local" in err
+    assert "local worker process" not in err
 
 
 def test_each_row_says_who_the_run_was(serial_rows):
