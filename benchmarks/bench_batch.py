@@ -107,7 +107,7 @@ skip_if = {{design = "open_loop"}}
 [[run]]
 action = "play_base_motion"
 psd = "{{base_motion}}"
-duration_s = {seconds}
+duration_s = {motion_seconds}
 seed = {seed}
 
 [[run]]
@@ -125,6 +125,9 @@ action = "stop_recording"
 """
 
 
+#: a base motion's waveform, at most: the generator's 16384 points must resolve the
+#: PSD's highest frequency (3 Hz); a longer dwell plays it over again, as the rig would
+MOTION_MAX_S = 1800.0
 #: the base motions of a seed's campaign: 4 designs x 3 motions = 12 runs; a batch of
 #: fewer logs than that (8 one-hour logs) runs the first motions only
 BASE_MOTIONS = ("BM1", "BM2", "BM3")
@@ -147,7 +150,8 @@ def generate(n_logs: int, seconds: float) -> dict:
         folder.mkdir(parents=True, exist_ok=True)
         spec = folder / "campaign.toml"
         spec.write_text(CAMPAIGN.format(
-            seed=seed, seconds=seconds, root=ROOT, base_motions=", ".join(
+            seed=seed, seconds=seconds, root=ROOT, motion_seconds=min(seconds, MOTION_MAX_S),
+            base_motions=", ".join(
                 f'"{ROOT}/profiles/base_motion/{m}.csv"' for m in motions)))
         c = load_campaign(spec)
         with Testbed("sim", testbed=c.testbed, fast=True, seed=seed, log_folder=folder,

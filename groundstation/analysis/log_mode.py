@@ -34,7 +34,7 @@ CLOSED_LOOP_STATES = {"relative": "RELATIVE", "inertial": "INERTIAL"}
 
 # (resolved design path, its modification time, table bytes) -> its mode: a campaign's
 # twelve logs share four designs, and a loop model costs ~0.1 s
-_MODES: dict[tuple[str, int, bytes], LoopMode | None] = {}
+_MODES: dict[tuple[str, int, bytes], tuple[LoopMode | None, str]] = {}
 
 
 @dataclass(frozen=True)
@@ -66,12 +66,14 @@ def _mode_of(path: Path, blob: bytes | None) -> tuple[LoopMode | None, str]:
     from ..params.design_file import load_design
     from ..params.table import unpack
 
-    design = load_design(path)
+    # the same design and table recur in log after log of a batch: reading and checking
+    # the design file was a fifth of a 60 s log's analysis, so it is done once per key
     key = (str(path.resolve()), path.stat().st_mtime_ns, blob or b"")
     if key not in _MODES:
+        design = load_design(path)
         values: dict[str, Any] | None = unpack(load_dictionary(), blob) if blob else None
-        _MODES[key] = design_mode(design, values)
-    return _MODES[key], design.mode
+        _MODES[key] = (design_mode(design, values), design.mode)
+    return _MODES[key]
 
 
 def find_design(reader, design: str | Path) -> DesignSource:
