@@ -136,3 +136,24 @@ def test_paced_datagrams_carry_the_fast_high_rate_frames(dictionary, device, cli
     paced = _packet_bytes(device.codec, b"".join(sent))
     assert paced == _packet_bytes(device.codec, _fast(dictionary, periods, None))
     assert len(paced) == 1500 * dictionary.packet("HIGH_RATE").frame_dtype.itemsize
+
+
+def test_a_batch_checks_every_column_as_one_frame_would(dictionary):
+    """The encoder checks a batch's float columns together; what passes or fails, and
+    the message, are those of the column checked alone."""
+    from groundstation.core.errors import EncodeError
+    enc = FrameCodec(dictionary).encoder("HIGH_RATE", crc_rows)
+    n = 50
+    ok = {"error_angle": np.zeros(n), "current_coarse": np.zeros(n), "mode": np.ones(n)}
+    seq = np.arange(n)
+    with_inf = {**ok, "error_angle": np.r_[np.inf, np.nan, np.zeros(n - 2)]}
+    frames = enc.records(with_inf, seq, seq)              # a float item may carry inf/NaN
+    assert np.isinf(frames["error_angle"][0]) and np.isnan(frames["error_angle"][1])
+    item = dictionary.packet("HIGH_RATE").item_by_name["current_coarse"]
+    too_big = np.zeros(n)
+    too_big[7] = (np.iinfo(np.int16).max + 1) * item.scale + item.offset
+    for bad, message in (({**ok, "current_coarse": too_big}, "value outside the wire range of i16"),
+                         ({**ok, "mode": np.r_[np.nan, np.ones(n - 1)]}, "non-finite value"),
+                         ({**ok, "error_angle": np.r_[1e39, np.zeros(n - 1)]}, "outside the range of f32")):
+        with pytest.raises(EncodeError, match=message):
+            enc.records(bad, seq, seq)
