@@ -353,7 +353,9 @@ class Recorder:
         self.record("note", {"text": text})
 
     def stop(self, timeout: float = 30.0, reason: str = "") -> RecorderStatus:
-        """Write what is queued, close the file cleanly, return the final status.
+        """Write what is queued, close the file cleanly, return the final status.  The
+        writer is waited for as long as it makes progress; `timeout` is how long it may
+        make none before it is given up on (then the state says so).
 
         `reason` (e.g. "interrupted by the operator (Ctrl-C)", "session taken over by
         ...") goes into the log's closing journal record, so the file says why it ends.
@@ -366,15 +368,46 @@ class Recorder:
             self.stop_reason = reason
             with self._put_lock:        # a put under way finishes first; none follows
                 self._accepting = False
-            try:
-                self._inbox.put(Stop(reason), timeout=timeout)
-            except queue.Full:
-                pass
-            self._stopped.wait(timeout)
+            if self._while_writing(timeout, lambda: self._queue_stop(reason)):
+                self._while_writing(timeout, lambda: self._stopped.wait(1.0))
         self._release(timeout)
         if was_recording and self.state == "stopped":
             self._remove_if_empty()
         return self.status()
+
+    def _queue_stop(self, reason: str) -> bool:
+        try:
+            self._inbox.put(Stop(reason), timeout=1.0)
+            return True
+        except queue.Full:
+            return False
+
+    def _while_writing(self, timeout: float, attempt: Callable[[], bool]) -> bool:
+        """Call `attempt` until it returns True; False once the writer has made no
+        progress (no block taken off its queue, no frames flushed) for `timeout` s, or
+        has ended.  A writer with a long backlog on a busy machine is slow, not stuck:
+        a fixed timeout killed one that had half an hour of a one-hour log still to
+        write, and that half hour was lost (a 1 h fast recording at load 8)."""
+        seen = None
+        deadline = time.monotonic() + timeout
+        while not attempt():
+            if self._stopped.is_set():
+                return True
+            if self._proc is None or not self._proc.is_alive():
+                return False
+            progress = (self._frames, self._queued())
+            if progress != seen:
+                seen, deadline = progress, time.monotonic() + timeout
+            elif time.monotonic() >= deadline:
+                log.warning("the log writer made no progress for %.0f s: stopping it", timeout)
+                return False
+        return True
+
+    def _queued(self) -> int:
+        try:
+            return self._inbox.qsize() if self._inbox is not None else 0
+        except (NotImplementedError, OSError, ValueError):
+            return -1
 
     def _release(self, timeout: float) -> None:
         """End the writer process and the status thread, close the queues and remove
@@ -448,8 +481,11 @@ class Recorder:
             if self.link_stats is not None and time.monotonic() >= next_stats:
                 next_stats = time.monotonic() + 1.0
                 self.record("link", _link_record(self.link_stats()))
+            outbox = self._outbox
+            if outbox is None:        # released: a stop that gave up on its writer
+                return
             try:
-                msg = self._outbox.get(timeout=0.2)
+                msg = outbox.get(timeout=0.2)
             except queue.Empty:
                 if self._proc is None or self._proc.is_alive():
                     continue
@@ -458,12 +494,12 @@ class Recorder:
                 # have landed after the wait above gave up: read that before calling the
                 # end unexpected
                 try:
-                    msg = self._outbox.get(timeout=0.2)
-                except (queue.Empty, EOFError, OSError):
+                    msg = outbox.get(timeout=0.2)
+                except (queue.Empty, EOFError, OSError, ValueError):
                     self._failed(f"the log writer process ended unexpectedly (exit code "
                                  f"{self._proc.exitcode})", self.last_flushed_host_time)
                     return
-            except (EOFError, OSError):
+            except (EOFError, OSError, ValueError):     # ValueError: closed meanwhile
                 return
             if isinstance(msg, Flushed):
                 self._frames, self._bytes, self.last_flushed_host_time = msg.frames, msg.size_bytes, msg.last_host_time
