@@ -85,10 +85,18 @@ def dask_client(scheduler: str = "local", workers: int = 2, *, listen: Listen | 
                                      f"{port} on {host}: give them two ports")
         _port_free(dashboard, "Dask dashboard")
         http = {"dashboard_address": _joined(*dashboard)}
+    import dask
     from dask.distributed import Client, LocalCluster
 
-    with LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=host,
-                      scheduler_port=port, **http) as cluster, Client(cluster) as client:
+    # distributed starts its workers with MALLOC_TRIM_THRESHOLD_=65536, which also fixes
+    # glibc's mmap threshold: every large numpy temporary is then mapped and unmapped
+    # afresh.  Measured in a worker (24 logs of 60 s): 6,200-6,400 page faults and
+    # 115 ms of the task thread's CPU per log, against 1,450-1,850 and 89-92 ms without
+    # it or in this process - the third of a log that made Dask lose to the loop.  Left
+    # unset here (a value the user exported still wins); one BLAS thread stays.
+    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
+            LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=host,
+                         scheduler_port=port, **http) as cluster, Client(cluster) as client:
         yield client
 
 
@@ -98,22 +106,27 @@ def _joined(host: str, port: int) -> str:
 
 
 #: the cost model behind choosing the serial loop for a small batch (local_cluster_pays),
-#: from bench_batch.py on a 2-core machine (docs/scale.md, "When Dask pays"): the serial
-#: task's seconds per log and per MB of log, and a local cluster's start (scheduler and
-#: worker processes up, the analysis imported in each)
-SERIAL_S_PER_LOG = 0.035
-SERIAL_S_PER_MB = 0.0038
-CLUSTER_START_S = 1.5
-CLUSTER_START_S_PER_WORKER = 1.5
+#: fitted to bench_batch.py on 2 cores (docs/scale.md, "When Dask pays"): the serial
+#: loop's seconds per log and per MB of log (60 s logs: 80 ms; 1 h logs: 1.7 s), a local
+#: cluster's start, and a worker's time for the same logs over the loop's (scheduling,
+#: its event loop, rows sent back)
+SERIAL_S_PER_LOG = 0.05
+SERIAL_S_PER_MB = 0.0032
+CLUSTER_START_S = 2.5
+CLUSTER_START_S_PER_WORKER = 0.15
+WORKER_SLOWDOWN = 1.35
 
 
 def local_cluster_pays(sizes: list[int], workers: int) -> tuple[bool, float, float]:
     """(does a local cluster of `workers` finish before the serial loop would, the serial
     loop's estimated seconds, the cluster's estimated seconds including its start) for
-    logs of `sizes` bytes.  One worker never pays: it is the serial loop plus a start."""
+    logs of `sizes` bytes.  One worker never pays: it is the serial loop plus a start.
+    On the measuring machine the cluster was slower for 100 logs of 60 s and quicker
+    for 150; this picks the loop up to about 120."""
     serial = sum(SERIAL_S_PER_LOG + SERIAL_S_PER_MB * b / 1e6 for b in sizes)
     cores = min(workers, os.cpu_count() or 1)
-    cluster = CLUSTER_START_S + CLUSTER_START_S_PER_WORKER * workers + serial / max(1, cores)
+    cluster = (CLUSTER_START_S + CLUSTER_START_S_PER_WORKER * workers
+               + serial * WORKER_SLOWDOWN / max(1, cores))
     return workers > 1 and cores > 1 and cluster < serial, serial, cluster
 
 
