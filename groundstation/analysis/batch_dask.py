@@ -153,8 +153,8 @@ def log_groups(sizes: list[int], groups: int) -> list[list[int]]:
 def analyze_group(paths: list[str], options: BatchOptions,
                   known: list[dict[str, Any] | None]) -> list[dict[str, Any]]:
     """One task: the rows of a group of logs, one after the other in the worker (each by
-    analyze_one, which never raises).  A task per log cost the driver and the worker
-    about 26 ms of CPU each (docs/scale.md): paid once per group now."""
+    analyze_one, which never raises).  Scheduling a task costs the driver about
+    11 ms of CPU (docs/scale.md): paid once per group, not per log."""
     return [analyze_one(p, options, k) for p, k in zip(paths, known)]
 
 

@@ -292,8 +292,9 @@ def _batch_options_problem(args, scheduler: str) -> str:
 
 
 def _cmd_batch(args) -> int:
-    """Many logs as one table: one Dask task per log (analysis/batch_dask.py), or the same
-    task in a loop here (--serial); rows in the order of the sorted paths."""
+    """Many logs as one table: in groups on Dask (analysis/batch_dask.py), or the same
+    task in a loop here (--serial, or a batch too small to pay for a cluster); rows in
+    the order of the sorted paths."""
     scheduler = "none" if args.serial else (args.scheduler or "local")
     problem = _batch_options_problem(args, scheduler)
     if problem:
