@@ -20,6 +20,7 @@ by another user's dashboard.
 from __future__ import annotations
 
 import contextlib
+import heapq
 import logging
 import os
 import uuid
@@ -141,12 +142,12 @@ def log_groups(sizes: list[int], groups: int) -> list[list[int]]:
     (longest-processing-time first; the work of a log grows with its bytes).  Each group
     is in index order, the groups in order of their first index."""
     groups = max(1, min(groups, len(sizes)))
-    load = [0] * groups
+    lightest = [(0, g) for g in range(groups)]          # a heap of (load, group)
     members: list[list[int]] = [[] for _ in range(groups)]
     for i in sorted(range(len(sizes)), key=lambda i: (-sizes[i], i)):
-        g = min(range(groups), key=lambda g: (load[g], g))
+        load, g = heapq.heappop(lightest)
         members[g].append(i)
-        load[g] += max(1, sizes[i])
+        heapq.heappush(lightest, (load + max(1, sizes[i]), g))
     return sorted((sorted(m) for m in members if m), key=lambda m: m[0])
 
 

@@ -404,6 +404,8 @@ class Recorder:
         return True
 
     def _queued(self) -> int:
+        """Blocks waiting for the writer; -1 where the queue cannot say (no sem_getvalue
+        on macOS, or closed): progress is then judged by the frames flushed alone."""
         try:
             return self._inbox.qsize() if self._inbox is not None else 0
         except (NotImplementedError, OSError, ValueError):
