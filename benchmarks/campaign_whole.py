@@ -1,7 +1,8 @@
 """Where a whole campaign's wall time goes: `bench_campaign.py --whole CAMPAIGN`.
 
 The campaign runs as a user runs it - `groundstation campaign run CAMPAIGN --device sim
---fast` as a process of its own, in a fresh folder - and its wall time is split:
+--fast`, through the console script, as a process of its own, in a fresh folder - and
+its wall time is split:
 
   start        from the process's launch to the campaign's first step (interpreter and
                imports, the simulator child, connecting)
@@ -104,6 +105,21 @@ class TreeSampler:
         return {f"{k} (x{counts[k]})": v for k, v in per_kind.items()}
 
 
+def _console_script(tree: Path, folder: Path) -> Path:
+    """The `groundstation` script as pip writes it for `tree` (its pyproject.toml's entry
+    point, imported at the top), so the campaign starts as a user's does.  Not `python
+    -m groundstation`: multiprocessing's spawn runs the parent's main script again in
+    each log writer, but skips a package's __main__ - so the script's imports are a cost
+    of every writer that -m would hide."""
+    import tomllib
+    entry = tomllib.loads((tree / "pyproject.toml").read_text())["project"]["scripts"]["groundstation"]
+    module, function = entry.split(":")
+    script = folder / "groundstation-script.py"
+    script.write_text(f"import sys\nfrom {module} import {function}\n"
+                      f"if __name__ == '__main__':\n    sys.exit({function}())\n")
+    return script
+
+
 def _device_seconds(folder: Path) -> tuple[float, int]:
     from groundstation.logs.reader import LogReader
     frames, logs = 0, 0
@@ -122,8 +138,8 @@ def whole(campaign: Path, *, analysis: bool, tree: Path | None = None) -> dict:
         env["PYTHONPATH"] = str(tree)
         campaign = tree / campaign.relative_to(ROOT)
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "groundstation", "campaign", "run", str(campaign),
-               "--device", "sim", "--fast"] + ([] if analysis else ["--no-analysis"])
+        cmd = [sys.executable, str(_console_script(tree or ROOT, Path(tmp))), "campaign", "run",
+               str(campaign), "--device", "sim", "--fast"] + ([] if analysis else ["--no-analysis"])
         t_launch = time.time()
         w0 = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=tmp, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,

@@ -45,19 +45,14 @@ from . import AnalysisError
 from .energy import ControlEnergy
 from .jitter import DEFAULT_INTEGRATION_PERIOD_S, JitterResult
 from .loop_mode import ModeCheck, mode_check
+from .names import AUTO_SENSOR, DEFAULT_SENSOR, METRICS, SENSORS
 from .spectra import DEFAULT_SEGMENT_S, Spectrum
 from .testbed_figures import TestbedFigures, figures_from_testbed
 from .validity import MAX_EXCLUDED_FRACTION, WindowValidity, window_validity
 from .window_sums import WindowSums, check_resistances, exclusion_rule
 
 PACKET = "HIGH_RATE"
-SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
-DEFAULT_SENSOR = "autocollimator"           # the reference's scoring sensor
-#: the sensor chosen per log by its testbed: the relative set-up has no autocollimator
-#: (nor IMU), its pointing is the inner encoder's; the inertial one scores the mirror
-AUTO_SENSOR = "auto"
 SENSOR_BY_SETUP = {Setup.RELATIVE: "encoder_inner", Setup.INERTIAL: DEFAULT_SENSOR}
-METRICS = ("jitter", "energy", "psd")
 DEFAULT_CHUNK_ROWS = 1 << 18                # ~2 MB per float64 column read at once
 CURRENTS = ("current_coarse", "current_fine")
 SATURATION_BITS = ("coarse_saturated", "fine_saturated")
@@ -464,5 +459,5 @@ def metrics_from_columns(columns: Mapping[str, Any], rate_hz: float, figures: Te
         sensor_excluded=sums.excluded if scoring else None, unscored=sums.unscored)
 
 
-__all__ = ["CURRENTS", "DEFAULT_CHUNK_ROWS", "DEFAULT_SENSOR", "LogMetrics", "METRICS", "PACKET",
-           "SATURATION_BITS", "SENSORS", "analyze_log", "metrics_from_columns"]
+__all__ = ["CURRENTS", "DEFAULT_CHUNK_ROWS", "LogMetrics", "PACKET", "SATURATION_BITS",
+           "analyze_log", "metrics_from_columns"]

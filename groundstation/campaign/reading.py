@@ -149,7 +149,7 @@ class _AnalysisTable:
 
     def sensor(self) -> None:
         if "sensor" in self.table:
-            from ..analysis import SENSORS            # the log adapter (numpy, h5py): only here
+            from ..analysis.names import SENSORS      # the names alone: no numerics imported
             if self.table["sensor"] not in SENSORS:
                 self.bad("sensor", f"not a scored sensor (one of {', '.join(SENSORS)})")
             else:

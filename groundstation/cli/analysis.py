@@ -13,11 +13,11 @@ import csv
 import json
 import sys
 from pathlib import Path
+from ..analysis.names import AUTO_SENSOR, METRICS, SENSORS
 from . import arguments
 
 # the analysis package's choices, repeated here so that parsing needs no numpy
 # (tests/analysis/test_analysis_log.py checks they are the same)
-METRICS = ("jitter", "energy", "psd")
 #: asked for by name only (not in the default): analysis/log_step.py, log_frf.py,
 #: log_hysteresis.py, log_friction_velocity.py
 EXTRA_METRICS = ("step", "frf", "hysteresis", "friction_velocity")
@@ -26,8 +26,6 @@ FRF_INPUTS = ("current_coarse", "torque_coarse_cmd", "current_fine", "torque_fin
 FRF_OUTPUTS = ("encoder_outer", "encoder_inner", "gyro_rate", "autocollimator", "los_estimate")
 #: coherence at or above which a frequency-response bin counts (log_frf's)
 MIN_COHERENCE = 0.9
-SENSORS = ("autocollimator", "los_estimate", "encoder_inner")
-AUTO_SENSOR = "auto"          # analysis.log_metrics.AUTO_SENSOR: chosen per log by its testbed
 
 EPILOG = """The window (--from/--to) is in seconds of device time from the start of each log.
 Jitter figures are in urad: mean, RMS (mean included), standard deviation, the RMS after

@@ -55,9 +55,11 @@ def test_profile_commit_while_playing_is_invalid_state_and_playback_goes_on(clie
 def test_take_over_events_in_order_all_to_the_new_owner(client, device, dictionary):
     codes = {v: k for k, v in dictionary.event_codes.items()}
     client.connect()
+    # subscribed before ARM: its ARMED event can arrive before the command's answer
+    # returns (a stressed run missed it when collecting started after)
+    old = collect(client)
     client.command("SET_MODE", mode="OPEN_LOOP")
     client.command("ARM")
-    old = collect(client)
     wait_for(lambda: any(codes[int(c)] == "ARMED" for b in old if b.name == "EVENT" for c in b["code"]))
     old.clear()
     other = open_client(dictionary, f"127.0.0.1:{device.tcp_port}", heartbeat=False)

@@ -13,7 +13,7 @@ from PySide6.QtWidgets import (QComboBox, QDoubleSpinBox, QFormLayout, QGridLayo
 
 from ...analysis.jitter import DEFAULT_INTEGRATION_PERIOD_S
 from ...analysis.log_frf import FRF_INPUTS, FRF_OUTPUTS
-from ...analysis.log_metrics import DEFAULT_SENSOR, SENSORS
+from ...analysis.names import DEFAULT_SENSOR, SENSORS
 from ...plant.testbed import TESTBEDS_DIR
 from .live import DEFAULT_LIVE_SECONDS
 

@@ -25,8 +25,9 @@ import numpy as np
 
 from ...analysis import AnalysisError
 from ...analysis.jitter import DEFAULT_INTEGRATION_PERIOD_S
-from ...analysis.log_metrics import (CURRENTS, DEFAULT_SENSOR, METRICS, PACKET, SATURATION_BITS,
-                                     SENSORS, LogMetrics, metrics_from_columns)
+from ...analysis.log_metrics import (CURRENTS, PACKET, SATURATION_BITS, LogMetrics,
+                                     metrics_from_columns)
+from ...analysis.names import DEFAULT_SENSOR, METRICS, SENSORS
 from ...analysis.testbed_figures import TestbedFigures, figures_from_testbed
 from ...analysis.spectra import DEFAULT_SEGMENT_S
 from ...core.dictionary import PacketDef
