@@ -12,6 +12,7 @@ See docs/analysis.md for the definitions.
 from __future__ import annotations
 
 from ..core.errors import GroundStationError
+from ..core.lazy_names import lazy_getattr
 
 
 class AnalysisError(GroundStationError):
@@ -32,14 +33,7 @@ _LAZY = {"ControlEnergy": "energy", "EnergyAccumulator": "energy", "control_ener
          "SENSORS": "names", "METRICS": "names"}
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        from importlib import import_module
-        value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
-        globals()[name] = value          # looked up once
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
 
 __all__ = ["AnalysisError", "ControlEnergy", "DEFAULT_INTEGRATION_PERIOD_S", "EnergyAccumulator",
            "JitterAccumulator", "JitterResult", "LogMetrics", "METRICS", "SENSORS", "Spectrum",

@@ -8,7 +8,7 @@ CPU at every writer's start, one writer per recording: docs/campaigns.md).
 
 from __future__ import annotations
 
-from importlib import import_module
+from ..core.lazy_names import lazy_getattr
 
 _LAZY = {
     "export_csv": "export", "export_mat": "export",
@@ -24,12 +24,7 @@ _LAZY = {
 }
 
 
-def __getattr__(name: str):
-    if name in _LAZY:
-        value = getattr(import_module(f".{_LAZY[name]}", __name__), name)
-        globals()[name] = value          # looked up once
-        return value
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
 
 
 def __dir__() -> list[str]:

@@ -1,0 +1,55 @@
+"""What a process pays at its start: a log writer imports the file layout and the codec,
+not the reader, export, replay or the link; the console script's entry point imports no
+command group; checking a name against the analysis imports no scipy.  Each is checked
+in a fresh interpreter (the modules a process has loaded, not a timing)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+
+
+def _loaded_after(statement: str) -> set[str]:
+    code = f"import sys, json\n{statement}\nprint(json.dumps(sorted(sys.modules)))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=120).stdout
+    return set(json.loads(out.splitlines()[-1]))
+
+
+def test_a_log_writer_imports_only_what_it_writes_with():
+    loaded = _loaded_after("import groundstation.logs.writer")
+    assert {"groundstation.logs.h5file", "groundstation.codec", "h5py"} <= loaded
+    for heavy in ("groundstation.logs.reader", "groundstation.logs.export",
+                  "groundstation.logs.replay", "groundstation.link", "scipy"):
+        assert heavy not in loaded, heavy
+
+
+def test_the_console_entry_point_imports_no_command_group():
+    loaded = _loaded_after("from groundstation.cli.entry import main")
+    assert not {m for m in loaded if m.startswith("groundstation.cli.") and m != "groundstation.cli.entry"}
+    assert "numpy" not in loaded
+
+
+def test_the_analysis_names_come_without_the_numerics():
+    loaded = _loaded_after("from groundstation.analysis.names import SENSORS")
+    assert "scipy" not in loaded and "h5py" not in loaded
+
+
+@pytest.mark.parametrize("package, name, module", [
+    ("groundstation.logs", "LogReader", "groundstation.logs.reader"),
+    ("groundstation.logs", "Recorder", "groundstation.logs.recorder"),
+    ("groundstation.analysis", "los_jitter", "groundstation.analysis.jitter"),
+    ("groundstation.analysis", "SENSORS", "groundstation.analysis.names"),
+])
+def test_a_package_name_is_the_defining_modules_own(package, name, module):
+    import importlib
+    assert getattr(importlib.import_module(package), name) is getattr(importlib.import_module(module), name)
+
+
+def test_an_unknown_name_is_an_attribute_error():
+    import groundstation.logs
+    with pytest.raises(AttributeError, match="no attribute 'Nope'"):
+        groundstation.logs.Nope
