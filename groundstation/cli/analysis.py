@@ -16,7 +16,8 @@ from pathlib import Path
 from ..analysis.names import AUTO_SENSOR, METRICS, SENSORS
 from . import arguments
 
-# the analysis package's choices, repeated here so that parsing needs no numpy
+# the default metrics and the sensors come from analysis/names.py (no numerics); the
+# choices below are repeated here so that parsing needs no numpy
 # (tests/analysis/test_analysis_log.py checks they are the same)
 #: asked for by name only (not in the default): analysis/log_step.py, log_frf.py,
 #: log_hysteresis.py, log_friction_velocity.py
