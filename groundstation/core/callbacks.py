@@ -15,7 +15,8 @@ from typing import Any, Callable
 
 
 class Callbacks:
-    """Callbacks called in the order they were added; `failures` counts the raises."""
+    """Callbacks called in the order they were added, those added `last` after all the
+    others; `failures` counts the raises."""
 
     def __init__(self, what: str, logger: logging.Logger) -> None:
         #: what a callback is, for the log line of a failure ("telemetry subscriber")
@@ -23,19 +24,22 @@ class Callbacks:
         self.failures = 0
         self._log = logger
         self._callbacks: list[Callable[..., Any]] = []
+        self._last: list[Callable[..., Any]] = []
 
-    def add(self, callback: Callable[..., Any]) -> None:
-        self._callbacks.append(callback)
+    def add(self, callback: Callable[..., Any], last: bool = False) -> None:
+        """`last`: called after every callback not added `last`, whenever those were
+        added - for an observer whose "it arrived" must mean "everyone has it"."""
+        (self._last if last else self._callbacks).append(callback)
 
     def remove(self, callback: Callable[..., Any]) -> None:
         """Stop calling `callback`; no error if it was never added (or already removed)."""
-        try:
-            self._callbacks.remove(callback)
-        except ValueError:
-            return
+        for callbacks in (self._callbacks, self._last):
+            if callback in callbacks:
+                callbacks.remove(callback)
+                return
 
     def __call__(self, *args: Any) -> None:
-        for callback in list(self._callbacks):
+        for callback in self._callbacks + self._last:
             try:
                 callback(*args)
             except Exception:
@@ -43,10 +47,10 @@ class Callbacks:
                 self._log.exception("%s %r failed", self.what, callback)
 
     def __len__(self) -> int:
-        return len(self._callbacks)
+        return len(self._callbacks) + len(self._last)
 
     def __contains__(self, callback: object) -> bool:
-        return callback in self._callbacks
+        return callback in self._callbacks or callback in self._last
 
 
 class TelemetryOutlet:
@@ -65,9 +69,11 @@ class TelemetryOutlet:
         """How many times a subscriber raised (each is logged, the others still called)."""
         return self._subscribers.failures
 
-    def subscribe(self, callback: Callable[[Any], None]) -> None:
-        """Call `callback(block)` for every block delivered, on the source's own thread."""
-        self._subscribers.add(callback)
+    def subscribe(self, callback: Callable[[Any], None], *, after_others: bool = False) -> None:
+        """Call `callback(block)` for every block delivered, on the source's own thread.
+        `after_others`: after every other subscriber, even those subscribed later (the
+        fast clock's "received": a recorder subscribed after it must have the block too)."""
+        self._subscribers.add(callback, last=after_others)
 
     def unsubscribe(self, callback: Callable[[Any], None]) -> None:
         """Stop calling `callback` (no error if it was not subscribed)."""

@@ -198,3 +198,38 @@ def test_clock_waits_for_the_recorder_instead_of_discarding(dictionary):
             clock.close()
         client.close()
         dev.stop()
+
+
+def test_a_block_counts_as_received_only_once_every_subscriber_has_it(dictionary):
+    """The clock subscribes before a recording starts, yet its "received" (which lets a
+    dwell return and the script stop the recording) must wait for subscribers added after
+    it: a stressed run lost the last 900 frames of a dwell this way.  The later subscriber
+    holds the chunk's last block and looks whether advance() has returned meanwhile: it
+    never may (the wait is the bound in which a wrong order shows; the right one waits
+    it out)."""
+    dev = SimulatedDevice(dictionary, pacing="manual").start()
+    client = open_client(dictionary, f"127.0.0.1:{dev.tcp_port}")
+    clock = None
+    advanced = threading.Event()
+    early: list[bool] = []
+    try:
+        client.connect()
+        clock = SteppedClock(dev, client, threading.Event())
+        target = dev.firmware.tick + 900
+
+        def recorder_like(block) -> None:       # subscribed after the clock, as a recorder is
+            if block.name == "HIGH_RATE" and len(block) and int(block["tick"][-1]) >= target:
+                early.append(advanced.wait(3.0))
+
+        client.subscribe(recorder_like)
+        runner = threading.Thread(target=lambda: (clock.advance(0.75), advanced.set()))
+        runner.start()
+        runner.join(60)
+        assert not runner.is_alive() and advanced.is_set()
+        assert early and not any(early)
+    finally:
+        if clock is not None:
+            clock.close()
+        client.close()
+        dev.stop()
+

@@ -40,3 +40,16 @@ def test_remove_is_idempotent_and_a_callback_may_remove_itself():
     cbs("lost", "x")
     assert seen == ["up"] and once not in cbs and len(cbs) == 0
     cbs.remove(once)                     # not there any more: no error
+
+
+def test_subscribers_after_others_are_called_last():
+    order: list[str] = []
+    calls = Callbacks("test subscriber", logging.getLogger(__name__))
+    calls.add(lambda: order.append("first"))
+    calls.add(lambda: order.append("observer"), last=True)
+    later = lambda: order.append("later")      # noqa: E731
+    calls.add(later)
+    calls()
+    assert order == ["first", "later", "observer"]
+    calls.remove(later)
+    assert len(calls) == 2 and later not in calls
