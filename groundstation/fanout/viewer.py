@@ -103,6 +103,7 @@ class WatchClient(TelemetryOutlet):
         self._instance: str | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
+        self._thread_lock = threading.Lock()     # start() and close() on different threads
         self._last_valid = 0.0
         self._bad_in_a_row = 0
         #: why the reader thread stopped on its own (None while it runs or stopped as asked)
@@ -175,9 +176,15 @@ class WatchClient(TelemetryOutlet):
             ctx.term()
             raise
         self._set_state(LinkState.CONNECTING, self.endpoint)
-        self._thread = threading.Thread(target=self._read, args=(ctx, sock),
-                                        name="gs-fanout-viewer", daemon=True)
-        self._thread.start()
+        reader = threading.Thread(target=self._read, args=(ctx, sock), name="gs-fanout-viewer",
+                                  daemon=True)
+        # started before it is published: a close() on another thread (the window's
+        # disconnect worker) that saw it unstarted failed to join it ("cannot join thread
+        # before it is started", a CI run).  A close() that comes before the assignment
+        # finds none to join; the reader sees _stop and ends by itself.
+        with self._thread_lock:
+            reader.start()
+            self._thread = reader
         return self
 
     @property
@@ -360,9 +367,10 @@ class WatchClient(TelemetryOutlet):
     def close(self) -> None:
         """Stop watching; safe to call twice."""
         self._stop.set()
-        if self._thread is not None:
-            self._thread.join(timeout=2.0)
-            self._thread = None
+        with self._thread_lock:
+            reader, self._thread = self._thread, None
+        if reader is not None:
+            reader.join(timeout=2.0)
         if self.link_state != LinkState.CLOSED:
             self._set_state(LinkState.CLOSED, "this console stopped watching")
 
