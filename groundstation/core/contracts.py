@@ -35,8 +35,11 @@ LinkListener = Callable[[str, str], None]
 class TelemetrySource(Protocol):
     """Where decoded telemetry comes from (live link or replay)."""
 
-    def subscribe(self, callback: Callable[[Block], None]) -> None:
-        """Call `callback(block)` for every decoded block, on the source's own thread."""
+    def subscribe(self, callback: Callable[[Block], None], *, after_others: bool = False) -> None:
+        """Call `callback(block)` for every decoded block, on the source's own thread.
+        `after_others`: call it after every other subscriber, even those subscribed
+        later - a consumer that treats its call as "everyone has the block" (the fast
+        clock, whose "received" lets a dwell end and the recording stop) needs this."""
 
     def unsubscribe(self, callback: Callable[[Block], None]) -> None:
         """Stop calling `callback` (no error if it was not subscribed)."""

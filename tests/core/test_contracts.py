@@ -11,6 +11,7 @@ import pytest
 
 from groundstation.core.contracts import (BaseMotionInstrument, CommandChannel, DeviceLink,
                                           TelemetrySource)
+from groundstation.fanout.viewer import WatchClient
 from groundstation.instruments.fg4050 import FunctionGenerator4050
 from groundstation.link.client import DeviceClient
 from groundstation.logs.replay import ReplaySource
@@ -62,6 +63,7 @@ def signature_problems(protocol, cls) -> list[str]:
 
 @pytest.mark.parametrize("protocol, cls", [(TelemetrySource, DeviceClient),
                                            (TelemetrySource, ReplaySource),
+                                           (TelemetrySource, WatchClient),
                                            (CommandChannel, DeviceClient),
                                            (DeviceLink, DeviceClient),
                                            (BaseMotionInstrument, FunctionGenerator4050)])
@@ -80,6 +82,7 @@ def test_the_checker_catches_a_mismatch():
 
     problems = signature_problems(TelemetrySource, Narrow)
     assert "Narrow.subscribe: parameter callback missing" in problems
+    assert "Narrow.subscribe: parameter after_others missing" in problems
     assert "Narrow.unsubscribe: extra required parameter extra" in problems
     assert "Narrow.add_link_listener missing" in problems and "Narrow.close missing" in problems
 
