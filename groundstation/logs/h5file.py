@@ -303,7 +303,11 @@ class LogFile:
                 _append_stream(self._stream_cols(f"{fg}/stream"), [fr for b in group for fr in b.frames])
             _append(col(f"{fg}/host_time"), host)
             self.frames_written += len(host)
-            self.last_host_time = float(host[-1])
+            # the newest arrival of any packet: blocks of one append are grouped by
+            # packet, so the last group's last time may be older than another group's
+            newest = float(host.max())
+            if self.last_host_time is None or newest > self.last_host_time:
+                self.last_host_time = newest
 
     def journal(self, records: list[tuple[float, str, dict[str, Any], bytes]]) -> None:
         """Append journal records (time, kind, JSON-able dict, blob)."""

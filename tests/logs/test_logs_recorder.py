@@ -78,9 +78,13 @@ def test_sigkill_mid_run_loses_at_most_half_a_second(tmp_path):
         host = hr["host_time"][:]
         frames = f["frames/HIGH_RATE/data"].shape[0]
         counted = sum(f[f"telemetry/{p}/sequence"].shape[0] for p in f["telemetry"])
+        # the flush reports the newest arrival of any packet (a HOUSEKEEPING frame can
+        # arrive after the last HIGH_RATE one: a stressed run saw 8.7 us)
+        newest = max(float(f[f"telemetry/{p}/host_time"][-1]) for p in f["telemetry"]
+                     if f[f"telemetry/{p}/host_time"].shape[0])
     assert counted >= last_flush[0]                # every frame up to the last flush
     assert frames == len(seq) and np.all(np.diff(seq) == 1)
-    assert host[-1] >= last_flush[1] - 1e-6
+    assert newest >= last_flush[1] - 1e-6
     # what the crash cost: frames that arrived after the last flush, at most 0.5 s worth
     assert killed_at - host[-1] < 0.5 + 0.1        # 0.1 s: scheduling between kill and flush
     # HDF5's own tools read it too, once its "open for writing" mark is cleared
