@@ -53,3 +53,13 @@ def test_an_unknown_name_is_an_attribute_error():
     import groundstation.logs
     with pytest.raises(AttributeError, match="no attribute 'Nope'"):
         groundstation.logs.Nope
+
+
+@pytest.mark.parametrize("package, name", [("groundstation.logs", "LogReader"),
+                                           ("groundstation.analysis", "analyze_log")])
+def test_dir_lists_a_name_before_its_first_use(package, name):
+    code = (f"import sys, json, {package} as p\n"
+            f"print(json.dumps([{name!r} in dir(p), {name!r} in vars(p)]))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, timeout=120).stdout
+    assert json.loads(out.splitlines()[-1]) == [True, False]    # listed, not yet imported

@@ -12,7 +12,7 @@ See docs/analysis.md for the definitions.
 from __future__ import annotations
 
 from ..core.errors import GroundStationError
-from ..core.lazy_names import lazy_getattr
+from ..core.lazy_names import lazy_dir, lazy_getattr
 
 
 class AnalysisError(GroundStationError):
@@ -34,6 +34,7 @@ _LAZY = {"ControlEnergy": "energy", "EnergyAccumulator": "energy", "control_ener
 
 
 __getattr__ = lazy_getattr(__name__, _LAZY, globals())
+__dir__ = lazy_dir(_LAZY, globals())
 
 __all__ = ["AnalysisError", "ControlEnergy", "DEFAULT_INTEGRATION_PERIOD_S", "EnergyAccumulator",
            "JitterAccumulator", "JitterResult", "LogMetrics", "METRICS", "SENSORS", "Spectrum",

@@ -24,4 +24,13 @@ def lazy_getattr(package: str, where: dict[str, str],
     return __getattr__
 
 
-__all__ = ["lazy_getattr"]
+def lazy_dir(where: dict[str, str], namespace: dict[str, Any]) -> Callable[[], list[str]]:
+    """The `__dir__` for the same package: its lazy names listed before their first use."""
+
+    def __dir__() -> list[str]:
+        return sorted(set(namespace) | set(where))
+
+    return __dir__
+
+
+__all__ = ["lazy_dir", "lazy_getattr"]

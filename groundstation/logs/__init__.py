@@ -8,7 +8,7 @@ CPU at every writer's start, one writer per recording: docs/campaigns.md).
 
 from __future__ import annotations
 
-from ..core.lazy_names import lazy_getattr
+from ..core.lazy_names import lazy_dir, lazy_getattr
 
 _LAZY = {
     "export_csv": "export", "export_mat": "export",
@@ -25,10 +25,7 @@ _LAZY = {
 
 
 __getattr__ = lazy_getattr(__name__, _LAZY, globals())
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(_LAZY))
+__dir__ = lazy_dir(_LAZY, globals())
 
 
 __all__ = sorted(_LAZY)
