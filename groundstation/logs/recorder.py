@@ -37,7 +37,7 @@ from .schema import JOURNAL_KINDS
 from .writer import writer_main
 
 if TYPE_CHECKING:
-    from .standby import WriterStandby
+    from .standby import SpareWriter, WriterStandby
 
 log = logging.getLogger(__name__)
 
@@ -198,6 +198,10 @@ class Recorder:
         self.last_flushed_host_time: float | None = None
         self._proc = None
         self._inbox = None
+        #: the standby's writer this recording took, and whether it has reported this
+        #: recording's clean end ("stopped"): then it goes back to the standby
+        self._spare: "SpareWriter | None" = None
+        self._ended_cleanly = False
         # puts to the writer happen under this lock and only while _accepting: after the
         # Stop nothing more enters the queue, so what is in it is exactly what the writer
         # reads, and its feeder thread can be joined (see _release)
@@ -248,13 +252,14 @@ class Recorder:
         """Spawn the writer on the reserved `path` (or hand it to the standby's spare)
         and wait for its Started."""
         config = {**self.config, "path": str(path), "run": run}
+        self._ended_cleanly = False
         protocol_dir = str(self._protocol_dir())
         spare = self.standby.take(self.queue_blocks) if self.standby is not None else None
         if spare is not None:
             try:
                 spare.orders.send((protocol_dir, config))
                 self._proc, self._inbox, self._outbox = spare.proc, spare.inbox, spare.outbox
-                spare.orders.close()
+                self._spare = spare
             except OSError:                 # it died after take() looked: start one anew
                 spare.discard()
                 spare = None
@@ -420,6 +425,12 @@ class Recorder:
             if self._status_thread is not threading.current_thread():
                 self._status_thread.join(timeout)
             self._status_thread = None
+        if self._hand_back():
+            return
+        spare, self._spare = self._spare, None
+        if spare is not None:           # ends with its recording: it hears no more orders
+            with contextlib.suppress(OSError):
+                spare.orders.close()
         if self._proc is not None:
             if self._proc.pid is not None:          # started (a failed start() may not be)
                 self._proc.join(timeout)
@@ -452,6 +463,23 @@ class Recorder:
         if self._tmpdir is not None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             self._tmpdir = None
+
+    def _hand_back(self) -> bool:
+        """The standby's writer back to it, waiting for the next recording, when this
+        one ended cleanly (its file closed, "stopped" reported: everything put was read
+        and nothing follows).  True when handed back; then the queues stay open."""
+        spare = self._spare
+        if (spare is None or self.standby is None or not self._ended_cleanly
+                or not self._proc.is_alive()):
+            return False
+        with self._put_lock:
+            self._accepting = False
+        self._spare = self._proc = self._inbox = self._outbox = None
+        if self._tmpdir is not None:     # the writer read the dictionary when it started
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            self._tmpdir = None
+        self.standby.give_back(spare)
+        return True
 
     def _remove_if_empty(self) -> None:
         """Remove the files of a recording that received nothing (see stop): an empty
@@ -515,6 +543,7 @@ class Recorder:
                 self.files.append(self.path)
             elif isinstance(msg, Stopped):
                 self._frames = msg.frames
+                self._ended_cleanly = True
                 self.state = "stopped"
                 self._stopped.set()
                 return

@@ -1,14 +1,21 @@
-"""A log writer process started before its recording: a campaign's next writer warms up
-while the current run records.
+"""Log writer processes kept ready between recordings: a campaign's next writer warms
+up while the current run records, and a writer that ended its recording cleanly writes
+the next one.
 
 Starting a writer costs a fresh interpreter importing numpy, h5py and the codec - about
-as long as a whole short run on the fast simulator (docs/campaigns.md, "Whole
-campaigns").  A `WriterStandby` keeps one spare writer spawned ahead: the process has
-done its imports and waits for the recording it will write (the file's path and the
-recording's settings, sent when the recording starts).  Each recording still has a
-writer process of its own, as without a standby - the isolation that protects the link
-and the operator's program from HDF5's failures is unchanged; only the wait moves out
-of the way.
+as long as a whole short run on the fast simulator, and a third of a second of CPU
+(docs/campaigns.md, "Whole campaigns").  A `WriterStandby` keeps one spare writer
+spawned ahead: the process has done its imports and waits for the recording it will
+write (the file's path and the recording's settings, sent when the recording starts).
+
+A writer whose recording ended cleanly (its file closed, every block written, the
+"stopped" report sent) is handed back and waits for the next recording's settings, so a
+campaign of many runs starts its writer processes once, not once a run.  What is not
+reused: a writer whose recording failed (a full disk, a failed write: HDF5's state after
+it is not trusted), one that was given up on or killed, one that ended.  Those end with
+their recording, as without a standby, and the next recording takes a fresh spare - so
+the isolation that protects the link and the operator's program from HDF5's failures is
+unchanged.
 
 A spare whose parent disappears ends by itself (it checks its parent while waiting); a
 spare found dead when wanted is replaced by an ordinary start.
@@ -25,6 +32,9 @@ from typing import Any
 
 #: how often a waiting spare looks whether its parent is still there, s
 PARENT_CHECK_S = 0.5
+#: writers kept waiting at most (the one spawned ahead and one handed back); one more
+#: would only hold memory
+MAX_WAITING = 2
 
 
 @dataclass
@@ -36,9 +46,11 @@ class SpareWriter:
     outbox: Any
     orders: Any            # the sending end of the pipe its recording's settings go down
     queue_blocks: int
+    #: recordings it has written to the end (a writer handed back after a clean stop)
+    recordings: int = 0
 
     def discard(self) -> None:
-        """End the spare unused and free its queues.  Killed, not asked: it holds no
+        """End the waiting writer and free its queues.  Killed, not asked: it holds no
         file and no data, and may still be importing (it would read the request only
         after that), so nobody waits for it."""
         with contextlib.suppress(OSError):
@@ -49,49 +61,87 @@ class SpareWriter:
             self.proc.join(5)
         for q in (self.inbox, self.outbox):
             q.close()
-            q.cancel_join_thread()
+            if self.recordings:
+                # A writer handed back had read everything up to its Stop, and nothing
+                # was put after it: our feeder thread has nothing left and ends at once.
+                # Joined, it lets go of the queue's semaphores now (see
+                # Recorder._release: no "leaked semaphore" warning at exit).
+                q.join_thread()
+            else:
+                q.cancel_join_thread()
 
 
 class WriterStandby:
-    """Keeps one spare writer spawned ahead.  `take()` hands it over (and spawns the
-    next one); `close()` ends the one waiting.  Thread-safe."""
+    """Keeps writers waiting for recordings: one spawned ahead, and those handed back
+    after a clean stop.  `take()` hands one over (and spawns the next one when none
+    is left waiting); `give_back()` returns one; `close()` ends those waiting.
+    Thread-safe."""
 
     def __init__(self, queue_blocks: int = 20000) -> None:
         self.queue_blocks = queue_blocks
-        self._spare: SpareWriter | None = None
+        self._waiting: list[SpareWriter] = []      # the newest last
         self._lock = threading.Lock()
         self._closed = False
-        #: spares spawned, and spares handed to a recording (figures for the tests and
-        #: the benchmark)
+        #: writers spawned, handed to a recording, and of those, handed over again after
+        #: a recording (figures for the tests and the benchmark)
         self.spawned = 0
         self.used = 0
+        self.reused = 0
+
+    def waiting_pids(self) -> list[int]:
+        """The process ids of the writers waiting, the one `take()` hands over last."""
+        with self._lock:
+            return [spare.proc.pid for spare in self._waiting]
 
     def prepare(self) -> None:
         """Spawn a spare now if none waits (returns at once: it warms up by itself)."""
         with self._lock:
-            if self._spare is None and not self._closed:
-                self._spare = self._spawn()
+            if not self._waiting and not self._closed:
+                self._waiting.append(self._spawn())
 
     def take(self, queue_blocks: int) -> SpareWriter | None:
-        """The spare, if one waits, is alive and fits (its queue's size); a new spare is
-        spawned for the recording after this one.  None: start a writer the usual way."""
+        """A waiting writer that is alive and fits (its queue's size), the one handed
+        back last first: it has certainly finished its imports.  When none is left
+        waiting, a new spare is spawned for the recording after this one.  None: start
+        a writer the usual way."""
         with self._lock:
             if self._closed:
                 return None
-            spare, self._spare = self._spare, None
-            if spare is not None and (not spare.proc.is_alive() or spare.queue_blocks != queue_blocks):
-                spare.discard()
-                spare = None
-            self._spare = self._spawn()
-            if spare is not None:
+            chosen = None
+            while self._waiting and chosen is None:
+                spare = self._waiting.pop()
+                if spare.proc.is_alive() and spare.queue_blocks == queue_blocks:
+                    chosen = spare
+                else:
+                    spare.discard()
+            if not self._waiting:
+                self._waiting.append(self._spawn())
+            if chosen is not None:
                 self.used += 1
-            return spare
+                self.reused += bool(chosen.recordings)
+            return chosen
+
+    def give_back(self, spare: SpareWriter) -> None:
+        """A writer whose recording has just ended cleanly (Recorder._release), waiting
+        for the next one's settings.  Ended instead when the standby is closed or enough
+        wait already."""
+        spare.recordings += 1
+        with self._lock:
+            surplus = []
+            if self._closed:
+                surplus.append(spare)
+            else:
+                self._waiting.append(spare)
+                while len(self._waiting) > MAX_WAITING:
+                    surplus.append(self._waiting.pop(0))
+        for extra in surplus:
+            extra.discard()
 
     def close(self) -> None:
         with self._lock:
             self._closed = True
-            spare, self._spare = self._spare, None
-        if spare is not None:
+            waiting, self._waiting = self._waiting, []
+        for spare in waiting:
             spare.discard()
 
     def _spawn(self) -> SpareWriter:

@@ -60,22 +60,46 @@ def writer_main(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> Non
 
 def spare_writer_main(inbox, outbox, orders, parent_pid: int) -> None:
     """Entry point of a spare writer (standby.py): spawned ahead, its imports done, it
-    waits for the recording's settings on `orders` and then writes it as writer_main
-    does.  A closed pipe (the standby discarded it) or a parent gone ends it unused."""
+    waits for a recording's settings on `orders` and writes it as writer_main does.  A
+    recording that ended cleanly sends it back to waiting for the next one; one that
+    failed ends it.  A closed pipe (the standby discarded it) or a parent gone ends it
+    waiting."""
+    ignore_terminal_interrupt()
+    # the niceness each recording asks for is counted from the parent's, as os.nice in a
+    # writer of its own counts it, not added again per recording
+    inherited = os.getpriority(os.PRIO_PROCESS, 0)
+    clean = True
+    while clean:
+        order = _next_order(orders, parent_pid)
+        if order is None:
+            return
+        protocol_dir, config = order
+        _lower_priority(inherited + (config.get("writer_niceness") or 0))
+        clean = _Writer(inbox, outbox, load_dictionary(protocol_dir), config).run()
+    _exit_once_reported(outbox, 0)
+
+
+def _next_order(orders, parent_pid: int):
+    """The next recording's (protocol folder, settings), or None once the pipe closed or
+    the parent is gone."""
     from .standby import PARENT_CHECK_S
 
-    ignore_terminal_interrupt()
     while True:
         try:
             if orders.poll(PARENT_CHECK_S):
-                protocol_dir, config = orders.recv()
-                break
+                return orders.recv()
         except (EOFError, OSError):
-            return
+            return None
         if os.getppid() != parent_pid:
-            return
-    orders.close()
-    _write_recording(inbox, outbox, protocol_dir, config)
+            return None
+
+
+def _lower_priority(niceness: int) -> None:
+    """This process's niceness raised to `niceness` (never lowered: that needs a
+    privilege; then, or where it is not permitted, it runs as it is)."""
+    with contextlib.suppress(OSError):
+        if niceness > os.getpriority(os.PRIO_PROCESS, 0):
+            os.setpriority(os.PRIO_PROCESS, 0, niceness)
 
 
 def _write_recording(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> None:
@@ -84,12 +108,16 @@ def _write_recording(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -
         with contextlib.suppress(OSError):
             os.nice(config["writer_niceness"])
     _Writer(inbox, outbox, load_dictionary(protocol_dir), config).run()
-    # The file is closed and the last report is queued: once it has reached the pipe,
-    # end without the interpreter's teardown of numpy and h5py, which the recorder
-    # would otherwise wait out at every stop (a few hundred ms on a busy machine)
+    _exit_once_reported(outbox, 0)
+
+
+def _exit_once_reported(outbox, code: int) -> None:
+    """End the process once the last report queued has reached the pipe, without the
+    interpreter's teardown of numpy and h5py, which the recorder would otherwise wait
+    out at every stop (a few hundred ms on a busy machine)."""
     outbox.close()
     outbox.join_thread()
-    os._exit(0)
+    os._exit(code)
 
 
 class _Writer:
@@ -120,8 +148,9 @@ class _Writer:
         f.flush()
         return f
 
-    def run(self) -> None:
-        """Open the first file, then alternate receiving and writing until the recording ends."""
+    def run(self) -> bool:
+        """Open the first file, then alternate receiving and writing until the recording
+        ends; True when it ended cleanly (the file closed, "stopped" reported)."""
         # the recorder created this file, empty and exclusively (reserve_log_path), for this
         # writer alone: LogFile's truncating create of it overwrites nothing
         path = Path(self.config["path"])
@@ -129,7 +158,7 @@ class _Writer:
             self.lf = self.open_file(path, self.run_number)
         except Exception as exc:
             self.outbox.put(StartFailed(f"cannot create log file: {_explain(exc, path)}"))
-            return
+            return False
         self.outbox.put(Started(str(path)))
         interval = self.config["flush_interval_s"]
         next_flush = time.monotonic() + interval
@@ -138,8 +167,11 @@ class _Writer:
             if time.monotonic() < next_flush and not self.stopping:
                 continue
             next_flush = time.monotonic() + interval
-            if self.stop_if_space_short() or self.write_pending():
-                return
+            if self.stop_if_space_short():
+                return False
+            if self.write_pending():
+                return True
+        return False
 
     def receive(self, next_flush: float) -> None:
         """Take what arrives until the next flush is due, a stop is asked, or the parent
@@ -249,9 +281,7 @@ class _Writer:
     def exit_failed(self, why: str, last_host_time, frames: int) -> None:
         """Report the failure and end the process at once, without closing the file."""
         self.outbox.put(Failed(why, last_host_time, frames))
-        self.outbox.close()
-        self.outbox.join_thread()
-        os._exit(3)
+        _exit_once_reported(self.outbox, 3)
 
 
 SPACE_MARGIN = 256 * 1024     # bytes kept free for metadata, chunk rounding and the close

@@ -1,15 +1,24 @@
-"""A campaign starts each run's log writer ahead, during the run before it (logs/standby.py),
-and leaves no spare writer behind when its session closes."""
+"""A campaign starts its first log writer ahead and hands each writer that ended a run's
+recording cleanly to the next run (logs/standby.py), and leaves no writer behind when
+its session closes."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from conftest import wait_for
 from groundstation import Testbed
 from groundstation.campaign import CampaignRunner, load_campaign
 from groundstation.logs import LogReader
 
 CAMPAIGNS = Path(__file__).resolve().parents[2] / "profiles" / "campaigns"
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except OSError:
+        return False
 
 
 def test_each_run_records_with_a_writer_started_ahead(tmp_path):
@@ -18,11 +27,15 @@ def test_each_run_records_with_a_writer_started_ahead(tmp_path):
                  history=tmp_path / "history") as tb:
         report = CampaignRunner(c, tb, max_step_seconds=1.0).run()
         standby = tb.recording.standby
-        used, spawned, left_over = standby.used, standby.spawned, standby._spare.proc
+        figures = standby.used, standby.spawned, standby.reused
+        left_over = standby.waiting_pids()
     assert report.status == "completed", report.summary()
-    # one spare before run 1, one more at each run's start: both runs wrote with a spare
-    assert (used, spawned) == (2, 3)
-    assert not left_over.is_alive()            # the session's close ended the spare left over
+    # one spare before run 1 and one more when run 1 took it; run 2 took run 1's writer
+    # back: two processes for two runs, the second never waited for
+    assert figures == (2, 2, 1)
+    assert len(left_over) == 2
+    for pid in left_over:                      # the session's close ended the writers left
+        wait_for(lambda pid=pid: not _alive(pid))
     for rec in report.recordings:
         with LogReader(rec["files"][0]) as log:
             assert log.n_frames("HIGH_RATE") >= 600

@@ -1,10 +1,12 @@
 """A writer process started ahead of its recording (logs/standby.py): the recording takes
-it instead of starting one, the log is the same, a spare that died is replaced by an
-ordinary start, and no spare outlives its owner."""
+it instead of starting one, the log is the same, a writer that ended its recording
+cleanly writes the next one and one that failed does not, a spare that died is replaced
+by an ordinary start, and no spare outlives its owner."""
 
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 import sys
 import textwrap
@@ -29,8 +31,9 @@ def _alive(pid: int) -> bool:
     return state != "Z"
 
 
-def _record(dictionary, folder, standby, name, first_seq):
-    rec = Recorder(dictionary, folder, test_name=name, standby=standby, flush_interval_s=0.05)
+def _record(dictionary, folder, standby, name, first_seq, **options):
+    rec = Recorder(dictionary, folder, test_name=name, standby=standby, flush_interval_s=0.05,
+                   **options)
     rec.start()
     writer_pid = rec._proc.pid
     feed = HighRateFeeder(dictionary, rec)
@@ -45,30 +48,70 @@ def test_recordings_take_the_spare_writer_and_write_the_same_log(tmp_path, dicti
     standby = WriterStandby()
     try:
         standby.prepare()
-        spare_pid = standby._spare.proc.pid
+        [spare_pid] = standby.waiting_pids()
         status, writer_pid, seq = _record(dictionary, tmp_path, standby, "warm", 0)
         assert writer_pid == spare_pid                 # the spare wrote it
-        assert (standby.spawned, standby.used) == (2, 1)   # and the next one waits
-        next_pid = standby._spare.proc.pid
+        assert (standby.spawned, standby.used) == (2, 1)   # and the next one was spawned
+        # it ended cleanly: back to waiting, the one taken next
+        assert standby.waiting_pids()[-1] == writer_pid and len(standby.waiting_pids()) == 2
         status2, writer_pid2, seq2 = _record(dictionary, tmp_path, standby, "warm", 5000)
-        assert writer_pid2 == next_pid
-        # a log written by a spare is a log like any other
+        assert writer_pid2 == writer_pid
+        assert (standby.spawned, standby.used, standby.reused) == (2, 2, 1)
+        # a log written by a spare, first or second, is a log like any other
         cold, _, _ = _record(dictionary, tmp_path / "cold", None, "cold", 0)
         for st, expected in ((status, seq), (status2, seq2), (cold, seq)):
             with h5py.File(st.files[0], "r") as f:
                 assert f.attrs["clean_close"]
                 assert np.array_equal(f["telemetry/HIGH_RATE/sequence"][:], expected)
-        last_spare = standby._spare.proc
+        waiting = standby.waiting_pids()
+        assert len(waiting) == 2
     finally:
         standby.close()
-    assert not _alive(last_spare.pid)                  # close() ended the spare left over
+    for pid in waiting:                                # close() ended the writers left over
+        wait_for(lambda pid=pid: not _alive(pid))
+
+
+def test_a_writer_whose_recording_failed_is_not_used_again(tmp_path, dictionary):
+    """A recording whose writer died (as after a failed write) ends failed; its writer
+    is not handed back, and the next recording gets another process, whose log is whole."""
+    standby = WriterStandby()
+    try:
+        standby.prepare()
+        rec = Recorder(dictionary, tmp_path, test_name="doomed", standby=standby)
+        rec.start()
+        doomed = rec._proc.pid
+        os.kill(doomed, signal.SIGKILL)
+        wait_for(lambda: rec.state == "failed")
+        assert rec.stop().state == "failed"
+        assert doomed not in standby.waiting_pids()
+        status, writer_pid, seq = _record(dictionary, tmp_path, standby, "next", 0)
+        assert writer_pid != doomed and standby.reused == 0
+        with LogReader(str(status.files[0])) as log:
+            assert np.array_equal(log.read("HIGH_RATE", ["sequence"])["sequence"], seq)
+    finally:
+        standby.close()
+
+
+def test_a_reused_writer_lowers_its_priority_once_not_once_a_recording(tmp_path, dictionary):
+    standby = WriterStandby()
+    try:
+        standby.prepare()
+        base = os.getpriority(os.PRIO_PROCESS, 0)
+        for run in range(3):
+            _, writer_pid, _ = _record(dictionary, tmp_path, standby, "nice", run * 2000,
+                                       writer_niceness=3)
+            # still waiting for the next recording: its niceness as the recording left it
+            assert os.getpriority(os.PRIO_PROCESS, writer_pid) == min(base + 3, 19)
+        assert standby.reused == 2
+    finally:
+        standby.close()
 
 
 def test_a_spare_that_died_is_replaced_by_an_ordinary_start(tmp_path, dictionary):
     standby = WriterStandby()
     try:
         standby.prepare()
-        dead = standby._spare.proc
+        dead = standby._waiting[0].proc
         dead.kill()
         dead.join(10)
         status, writer_pid, seq = _record(dictionary, tmp_path, standby, "after-death", 0)
@@ -89,7 +132,7 @@ def test_a_spare_whose_owner_is_gone_ends_by_itself(tmp_path):
         if __name__ == "__main__":
             standby = WriterStandby()
             standby.prepare()
-            print(standby._spare.proc.pid, flush=True)
+            print(standby.waiting_pids()[0], flush=True)
             os._exit(0)                      # no close(): as if killed
     """))
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
