@@ -179,6 +179,10 @@ def _profile(args, testbed, duration_s: float | None = None, seed: int | None = 
                         precompensate=precompensate)
 
 
+#: how long --check waits for the device's first frame before switching the output on, s
+FIRST_FRAME_S = 10.0
+
+
 class _BaseEncoder:
     """Telemetry subscriber keeping the base encoder of the last `keep_s` seconds, with
     device times (unwrapped ticks / control rate) - all a check needs, at 16 bytes a frame."""
@@ -193,6 +197,7 @@ class _BaseEncoder:
         self._x: list[np.ndarray] = []
         self._n = 0
         self._lock = threading.Lock()
+        self._first = threading.Event()
 
     def __call__(self, block) -> None:
         import numpy as np
@@ -205,9 +210,14 @@ class _BaseEncoder:
             self._t.append(t)
             self._x.append(x)
             self._n += len(t)
+            self._first.set()
             while self._n - len(self._t[0]) > self.keep and len(self._t) > 1:
                 self._n -= len(self._t.pop(0))
                 self._x.pop(0)
+
+    def wait_first(self, timeout_s: float) -> bool:
+        """True once a frame has arrived; False after `timeout_s` without one."""
+        return self._first.wait(timeout_s)
 
     def newest(self) -> float | None:
         with self._lock:
@@ -263,6 +273,15 @@ def _write_csp(path: str, check) -> None:
                 w.writerow([f"{f:.6g}", f"{t:.6e}", f"{a:.6e}"])
     except OSError as exc:
         raise GroundStationError(f"cannot write {path}: {exc}") from None
+
+
+def _first_frame_before_output(enc: _BaseEncoder) -> None:
+    """The output-on mark is the newest device time seen: with no frame in yet (a quick
+    upload right after connecting) there is none, and the check would have nothing to
+    start from - refused before the output goes on."""
+    if not enc.wait_first(FIRST_FRAME_S):
+        raise GroundStationError(f"no base-encoder telemetry within {FIRST_FRAME_S:g} s of "
+                                 f"connecting to the device: nothing to check; the output stays off")
 
 
 def _cmd_upload(args) -> int:
@@ -321,6 +340,8 @@ def _cmd_upload(args) -> int:
                 print(fg.describe(args.channel), flush=True)
                 if args.output == "on":
                     enc = watch.get("encoder")
+                    if enc is not None:
+                        _first_frame_before_output(enc)
                     _hold(fg, args.channel, args.hold, marks, enc.newest if enc else None)
             finally:
                 stop_watching()               # before the simulator it watches stops

@@ -15,6 +15,7 @@ from __future__ import annotations
 import atexit
 import logging
 import re
+import socket
 import threading
 import warnings
 from dataclasses import dataclass
@@ -179,6 +180,7 @@ class VisaLink:
         inst = self.rm.open_resource(self.resource_name, read_termination="\n",
                                      write_termination="\n",
                                      timeout=timeout_ms or self.timeout_ms)
+        _no_delay(inst, self.resource_name)
         return inst
 
     @staticmethod
@@ -290,3 +292,26 @@ class VisaLink:
 
 __all__ = ["DEFAULT_BACKEND", "ResourceListing", "VisaLink", "io_failure", "list_resources",
            "normalise_backend", "resource_manager", "shorten"]
+
+
+def _no_delay(inst, resource_name: str) -> None:
+    """Small writes sent at once on a raw TCP socket (TCP_NODELAY).  A checked setting is
+    the command, then `*ESR?`: two small writes in a row.  With Nagle's algorithm the
+    second waits until the instrument acknowledges the first, and an instrument with
+    nothing to answer to a setting delays that acknowledgement (about 40 ms on Linux):
+    44 ms per checked setting, 0.18 s per base-motion upload, measured on the simulated
+    generator.  VISA names this VI_ATTR_TCPIP_NODELAY, but pyvisa-py (0.8) does not
+    accept it on a SOCKET resource, so the option is set on its socket.  Other
+    resources (USB, VXI-11, pyvisa-sim, another backend) are left as they are."""
+    if not resource_name.upper().endswith("::SOCKET"):
+        return
+    session = getattr(getattr(inst, "visalib", None), "sessions", {}).get(getattr(inst, "session", None))
+    sock = getattr(session, "interface", None)
+    if not isinstance(sock, socket.socket):
+        log.debug("%s: TCP_NODELAY not set (no socket of pyvisa-py's); small writes may wait "
+                  "for an acknowledgement", resource_name)
+        return
+    try:
+        sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+    except OSError as exc:
+        log.debug("%s: TCP_NODELAY not set (%s)", resource_name, exc)

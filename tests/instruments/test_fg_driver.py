@@ -401,3 +401,14 @@ def test_the_simulator_refuses_what_the_instrument_refuses():
         g.handle_line("C1:FOO")
     errors = [g.handle_line("SYST:ERR?")[0] for _ in range(21)]
     assert errors[19] == '-350,"Queue overflow"' and errors[20] == '0,"No error"'
+
+
+def test_a_socket_generator_sends_small_writes_at_once(server):
+    """A checked setting is two small writes (the command, then *ESR?): with Nagle's
+    algorithm on, the second waited for the instrument's delayed acknowledgement of the
+    first (44 ms each, 0.18 s per base-motion upload).  The link's socket has it off."""
+    with open_generator(server.resource, timeout_s=2.0) as fg:
+        inst = fg._link.inst
+        sock = inst.visalib.sessions[inst.session].interface
+        assert sock.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+        fg.set_output(1, False)                    # and the link works as before
