@@ -179,59 +179,6 @@ def _profile(args, testbed, duration_s: float | None = None, seed: int | None = 
                         precompensate=precompensate)
 
 
-#: how long --check waits for the device's first frame before switching the output on, s
-FIRST_FRAME_S = 10.0
-
-
-class _BaseEncoder:
-    """Telemetry subscriber keeping the base encoder of the last `keep_s` seconds, with
-    device times (unwrapped ticks / control rate) - all a check needs, at 16 bytes a frame."""
-
-    def __init__(self, rate_hz: float, keep_s: float):
-        from ..codec.ticks import TickUnwrapper
-
-        self.rate = rate_hz
-        self.keep = int(keep_s * rate_hz)
-        self._unwrap = TickUnwrapper()
-        self._t: list[np.ndarray] = []
-        self._x: list[np.ndarray] = []
-        self._n = 0
-        self._lock = threading.Lock()
-        self._first = threading.Event()
-
-    def __call__(self, block) -> None:
-        import numpy as np
-
-        if block.name != "HIGH_RATE" or not len(block):
-            return
-        t = self._unwrap.unwrap(block["tick"]) / self.rate
-        x = np.asarray(block["encoder_base"], dtype=float)
-        with self._lock:
-            self._t.append(t)
-            self._x.append(x)
-            self._n += len(t)
-            self._first.set()
-            while self._n - len(self._t[0]) > self.keep and len(self._t) > 1:
-                self._n -= len(self._t.pop(0))
-                self._x.pop(0)
-
-    def wait_first(self, timeout_s: float) -> bool:
-        """True once a frame has arrived; False after `timeout_s` without one."""
-        return self._first.wait(timeout_s)
-
-    def newest(self) -> float | None:
-        with self._lock:
-            return float(self._t[-1][-1]) if self._t else None
-
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        import numpy as np
-
-        with self._lock:
-            if not self._t:
-                return np.zeros(0), np.zeros(0)
-            return np.concatenate(self._t), np.concatenate(self._x)
-
-
 def _report(check, window, tolerance: float, csv_path: str | None) -> int:
     """Print the comparison; write the CSP curves; 0 within tolerance, 1 not."""
     from ..basemotion import band_rms
@@ -275,17 +222,9 @@ def _write_csp(path: str, check) -> None:
         raise GroundStationError(f"cannot write {path}: {exc}") from None
 
 
-def _first_frame_before_output(enc: _BaseEncoder) -> None:
-    """The output-on mark is the newest device time seen: with no frame in yet (a quick
-    upload right after connecting) there is none, and the check would have nothing to
-    start from - refused before the output goes on."""
-    if not enc.wait_first(FIRST_FRAME_S):
-        raise GroundStationError(f"no base-encoder telemetry within {FIRST_FRAME_S:g} s of "
-                                 f"connecting to the device: nothing to check; the output stays off")
-
-
 def _cmd_upload(args) -> int:
     from ..instruments.spec4050 import arb_name_for
+    from .fg_watch import BaseEncoderWatch, first_frame_before_output
 
     testbed = _testbed(args)
     profile = _profile(args, testbed)
@@ -312,7 +251,7 @@ def _cmd_upload(args) -> int:
         from ..station.rig import open_link
 
         d = load_dictionary(args.protocol_dir)
-        enc = _BaseEncoder(d.control_rate_hz, profile.duration_s + settle + 30.0)
+        enc = BaseEncoderWatch(d.control_rate_hz, profile.duration_s + settle + 30.0)
         client = open_link(d, address)
         packet_rate = next((p.rate_hz for p in d.packets if p.name == "HIGH_RATE"), None)
         watch.update(client=client, encoder=enc, rate=float(packet_rate or d.control_rate_hz))
@@ -341,7 +280,7 @@ def _cmd_upload(args) -> int:
                 if args.output == "on":
                     enc = watch.get("encoder")
                     if enc is not None:
-                        _first_frame_before_output(enc)
+                        first_frame_before_output(enc)
                     _hold(fg, args.channel, args.hold, marks, enc.newest if enc else None)
             finally:
                 stop_watching()               # before the simulator it watches stops
