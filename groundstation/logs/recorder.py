@@ -460,6 +460,9 @@ class Recorder:
                 # and a feeder blocked on it would never end: not waited for
                 q.cancel_join_thread()
         self._inbox = self._outbox = None
+        self._remove_protocol_dir()
+
+    def _remove_protocol_dir(self) -> None:
         if self._tmpdir is not None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
             self._tmpdir = None
@@ -475,9 +478,7 @@ class Recorder:
         with self._put_lock:
             self._accepting = False
         self._spare = self._proc = self._inbox = self._outbox = None
-        if self._tmpdir is not None:     # the writer read the dictionary when it started
-            shutil.rmtree(self._tmpdir, ignore_errors=True)
-            self._tmpdir = None
+        self._remove_protocol_dir()      # the writer read the dictionary when it started
         self.standby.give_back(spare)
         return True
 

@@ -103,10 +103,7 @@ def _lower_priority(niceness: int) -> None:
 
 
 def _write_recording(inbox, outbox, protocol_dir: str, config: dict[str, Any]) -> None:
-    if config.get("writer_niceness"):
-        # not permitted here (OSError): the writer runs at the usual priority
-        with contextlib.suppress(OSError):
-            os.nice(config["writer_niceness"])
+    _lower_priority(os.getpriority(os.PRIO_PROCESS, 0) + (config.get("writer_niceness") or 0))
     _Writer(inbox, outbox, load_dictionary(protocol_dir), config).run()
     _exit_once_reported(outbox, 0)
 
