@@ -29,6 +29,17 @@ def wait_for(predicate, timeout: float = 30.0, interval: float = 0.005):
     raise AssertionError(f"condition not met within {timeout} s")
 
 
+def process_alive(pid: int) -> bool:
+    """A process that exists and is not a zombie (Linux /proc)."""
+    from pathlib import Path
+
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
 def collect(client):
     """Every telemetry block the client hands on, in a list (the test reads it)."""
     blocks = []

@@ -6,19 +6,12 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from conftest import wait_for
+from conftest import process_alive, wait_for
 from groundstation import Testbed
 from groundstation.campaign import CampaignRunner, load_campaign
 from groundstation.logs import LogReader
 
 CAMPAIGNS = Path(__file__).resolve().parents[2] / "profiles" / "campaigns"
-
-
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
 
 
 def test_each_run_records_with_a_writer_started_ahead(tmp_path):
@@ -35,7 +28,7 @@ def test_each_run_records_with_a_writer_started_ahead(tmp_path):
     assert figures == (2, 2, 1)
     assert len(left_over) == 2
     for pid in left_over:                      # the session's close ended the writers left
-        wait_for(lambda pid=pid: not _alive(pid))
+        wait_for(lambda pid=pid: not process_alive(pid))
     for rec in report.recordings:
         with LogReader(rec["files"][0]) as log:
             assert log.n_frames("HIGH_RATE") >= 600

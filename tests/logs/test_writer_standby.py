@@ -15,20 +15,11 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from conftest import HighRateFeeder, wait_for
+from conftest import HighRateFeeder, process_alive, wait_for
 from groundstation.logs import LogReader, Recorder
 from groundstation.logs.standby import WriterStandby
 
 ROOT = Path(__file__).resolve().parents[2]
-
-
-def _alive(pid: int) -> bool:
-    """A process that exists and is not a zombie."""
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
 
 
 def _record(dictionary, folder, standby, name, first_seq, **options):
@@ -68,7 +59,7 @@ def test_recordings_take_the_spare_writer_and_write_the_same_log(tmp_path, dicti
     finally:
         standby.close()
     for pid in waiting:                                # close() ended the writers left over
-        wait_for(lambda pid=pid: not _alive(pid))
+        wait_for(lambda pid=pid: not process_alive(pid))
 
 
 def test_a_writer_whose_recording_failed_is_not_used_again(tmp_path, dictionary):
@@ -139,4 +130,4 @@ def test_a_spare_whose_owner_is_gone_ends_by_itself(tmp_path):
                           timeout=120, cwd=tmp_path, env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert done.returncode == 0, done.stderr
     spare_pid = int(done.stdout.split()[0])
-    wait_for(lambda: not _alive(spare_pid), timeout=60)
+    wait_for(lambda: not process_alive(spare_pid), timeout=60)
