@@ -139,6 +139,14 @@ def _cmd_log(args) -> int:
             os.dup2(devnull, sys.stdout.fileno())
             os.close(devnull)
         return result.exit_code
+    if args.action == "compress":
+        # in a process of its own: HDF5 may crash on a failed write (logs/compress_behind.py)
+        from ..logs.compress import FAILED
+        from ..logs.compress_behind import CompressBehind
+        compressing = CompressBehind(echo=lambda text: print(text, flush=True), background=False)
+        compressing.submit(args.files)
+        outcomes = compressing.finish()
+        return 1 if any(o.state == FAILED for o in outcomes) else 0
     if args.action == "info":
         with LogReader(args.file) as r:
             info = r.summary()
@@ -243,6 +251,9 @@ def add_parsers(sub) -> None:
     a = lsub.add_parser("check", help="what of a (damaged) log is readable: exit 0 intact, "
                                       "1 damaged but partly readable, 2 unreadable")
     a.add_argument("file")
+    a = lsub.add_parser("compress", help="deflate logs recorded uncompressed (a fast campaign "
+                                         "stopped before it compressed them), in place")
+    a.add_argument("files", nargs="+", metavar="file")
     a = lsub.add_parser("export", help="channels of one packet to CSV or MATLAB .mat")
     a.add_argument("file")
     a.add_argument("--format", choices=["csv", "mat"], default="csv")

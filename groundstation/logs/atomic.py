@@ -29,6 +29,16 @@ def create_new(path: str | Path) -> bool:
     return True
 
 
+PART_SUFFIX = ".part"
+
+
+def leftovers(path: str | Path) -> list[Path]:
+    """The temporary files of `path` a killed writer left behind (a process that dies
+    mid-way cannot delete its own)."""
+    path = Path(path)
+    return sorted(path.parent.glob(f".{path.name}.*{PART_SUFFIX}"))
+
+
 def _describe(exc: OSError) -> str:
     return exc.strerror or str(exc)
 
@@ -41,7 +51,7 @@ def atomic_output(path: str | Path, error_cls: type[Exception]) -> Iterator[Path
     of the input, for one) pass through unchanged."""
     path = Path(path)
     while True:
-        tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}.part"
+        tmp = path.parent / f".{path.name}.{secrets.token_hex(4)}{PART_SUFFIX}"
         try:
             if create_new(tmp):
                 break
@@ -60,4 +70,4 @@ def atomic_output(path: str | Path, error_cls: type[Exception]) -> Iterator[Path
         raise
 
 
-__all__ = ["atomic_output"]
+__all__ = ["atomic_output", "create_new", "leftovers"]

@@ -5,7 +5,8 @@ the chunk where a read fails), so the answer is HDF5's own: a chunk whose compre
 bytes were overwritten or cut off fails to decompress.  Uncompressed data cannot be
 checked that way (overwritten bytes read as other numbers, a chunk past the end of a
 truncated file reads as zeros); the recorder compresses every per-frame dataset, so
-this concerns only logs written with compression switched off.  HDF5's chunk index is
+this concerns only a fast session's logs before they were compressed behind it (or
+left so by a Ctrl-C: `groundstation log compress`).  HDF5's chunk index is
 not walked on its own: on a truncated file HDF5 1.14/2.0 can loop for ever doing so.
 
 The verdict: intact (exit status 0), damaged but partly readable (1), unreadable (2).

@@ -57,7 +57,9 @@ JOURNAL_KINDS = ("note", "command", "event", "parameter_table", "profile",
 
 #: compression of per-frame datasets: deflate (gzip) level 1 after byte shuffling. Among
 #: the filters every HDF5 reader has (h5dump, MATLAB, HDFView), it is the fast one;
-#: benchmarks/bench_logs.py measures it against LZF (h5py-only) and no compression.
+#: benchmarks/bench_logs.py measures it against LZF (h5py-only) and no compression.  A
+#: fast session's writer records without it and compresses behind the runs instead
+#: (compress_behind.py): deflate was that writer's whole cost.
 COMPRESSION = {"compression": "gzip", "compression_opts": 1, "shuffle": True}
 #: file format bounds: HDF5 1.10 (the first with SWMR), so 1.10-era tools and MATLAB
 #: read our logs; "latest" would tie them to the newest library

@@ -16,6 +16,7 @@ from ..core.contracts import DeviceLink
 from ..core.errors import GroundStationError
 from ..logs import Recorder
 from ..logs.live import attach_recorder
+from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import ParameterLoader
 
 log = logging.getLogger(__name__)
@@ -34,23 +35,30 @@ class RecordingSlot:
         self._t0 = 0.0
         #: the log writers started ahead (prepare_ahead), or None
         self.standby = None
+        #: the process compressing a fast session's logs behind it, or None
+        self.compress_behind = None
+        self._compress_later = False
 
     @property
     def active(self) -> bool:
         return self.recorder is not None
 
     def start(self, client: DeviceLink, dictionary, testbed, folder: Path, name: str, notes: str = "",
-              on_failure: Callable[[str], None] | None = None,
-              chunk_rows: int | None = None, writer_niceness: int = 0) -> Path:
-        """`chunk_rows`, `writer_niceness`: the log's HDF5 chunking and the writer
-        process's priority (Recorder); a fast session passes schema.FAST_CHUNK_ROWS and
-        schema.FAST_WRITER_NICENESS."""
+              on_failure: Callable[[str], None] | None = None, fast: bool = False) -> Path:
+        """`fast`: the session runs on the fast simulator, which delivers thousands of
+        frames a flush: larger HDF5 chunks (schema.FAST_CHUNK_ROWS), a writer process
+        that yields a contended core to the simulator (schema.FAST_WRITER_NICENESS),
+        and no deflate in the writer - a log closed cleanly is compressed behind the
+        session, off the runs' path (logs/compress_behind.py; `finish_compression`
+        waits for it)."""
         assert self.recorder is None, "one recording at a time (the Station checks)"
         rec = Recorder(dictionary, folder, test_name=name, notes=notes,
                        testbed_text=testbed.path.read_text(), testbed_name=testbed.name,
                        testbed_path=str(testbed.path), on_failure=on_failure,
-                       chunk_rows=chunk_rows, writer_niceness=writer_niceness,
-                       standby=self.standby)
+                       chunk_rows=FAST_CHUNK_ROWS if fast else None,
+                       writer_niceness=FAST_WRITER_NICENESS if fast else 0,
+                       standby=self.standby, compression={} if fast else None)
+        self._compress_later = fast
         path = rec.start()
         try:
             if client is not None:
@@ -119,6 +127,7 @@ class RecordingSlot:
             self.echo(status.note)
         elif status.state == "stopped":
             self.echo(f"recorded {status.frames} frames to {', '.join(p.name for p in status.files)}")
+        self._compress(status)
         return entry, status
 
     def close(self, reason: str = "") -> None:
@@ -143,6 +152,24 @@ class RecordingSlot:
             entry["removed"] = [str(p) for p in status.removed]
             self.echo(status.note)
         self.entries.append(entry)
+        self._compress(status)
+
+    def _compress(self, status) -> None:
+        """A log recorded uncompressed and closed cleanly goes to the compression behind
+        the session; one that ended otherwise stays exactly as recorded (evidence)."""
+        if not (self._compress_later and status.state == "stopped" and status.files):
+            return
+        if self.compress_behind is None:
+            from ..logs.compress_behind import CompressBehind
+            self.compress_behind = CompressBehind(echo=self.echo)
+        self.compress_behind.submit(status.files)
+
+    def finish_compression(self) -> None:
+        """Wait for the logs compressed behind the session (Ctrl-C leaves the rest
+        uncompressed, whole and readable, and says how to compress them)."""
+        compressing, self.compress_behind = self.compress_behind, None
+        if compressing is not None:
+            compressing.finish()
 
     def backlog(self) -> float:
         """How full the recorder's queue to its writer is (0..1; 0 when nothing records):

@@ -53,7 +53,6 @@ from ..core.contracts import BaseMotionInstrument, DeviceLink
 from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import GroundStationError
 from ..core.kinds import SIMULATED_DEVICE, BetweenSteps, LinkState
-from ..logs.schema import FAST_CHUNK_ROWS, FAST_WRITER_NICENESS
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
 from .generator_desk import GeneratorDesk
@@ -265,7 +264,8 @@ class Station:
     def close(self) -> None:
         """Close everything this session opened (after make_safe)."""
         for step in (self.recording.close, self.recording.close_standby, self._close_generator,
-                     self._close_clock, self._close_client, self._stop_sim):
+                     self._close_clock, self._close_client, self._stop_sim,
+                     self.recording.finish_compression):
             try:
                 step()
             except Exception:                          # closing must reach every step
@@ -498,12 +498,9 @@ class Station:
     def start_recording(self, name: str, notes: str = "") -> Path:
         if self.recording.active:
             raise ScriptError(f"start_recording '{name}': '{self.recorder.test_name}' is still recording")
-        # the fast simulator delivers thousands of frames a flush: larger chunks for the log
-        # writer, whose process yields a contended core to it (logs/schema.py FAST_*)
         fast = isinstance(self.clock, SteppedClock)
         path = self.recording.start(self.client, self.d, self.testbed, self.log_folder, name, notes,
-                                    chunk_rows=FAST_CHUNK_ROWS if fast else None,
-                                    writer_niceness=FAST_WRITER_NICENESS if fast else 0)
+                                    fast=fast)
         if self.device_spec != "attached":     # (attached: the window's recording says it)
             self.recording.journal("testbed", device_record(
                 self.device_spec == SIMULATED_DEVICE, address=self.address, seed=self.seed, fast=fast,
