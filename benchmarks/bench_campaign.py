@@ -25,6 +25,10 @@ queue's feeder to the log writer) and of the log writer process (Linux: from /pr
 round) are printed, and their medians.
 
 Run: .venv/bin/python benchmarks/bench_campaign.py [--rounds 3] [--profile]
+     .venv/bin/python benchmarks/bench_campaign.py --whole CAMPAIGN... [--before DIR]
+         (whole campaigns as `campaign run` runs them: campaign_whole.py)
+     .venv/bin/python benchmarks/bench_campaign.py --whole CAMPAIGN... --open-session N
+         (N runs of each from one open session: campaign_open_session.py)
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from campaign_open_session import open_session, print_open_session
 from campaign_whole import print_whole, whole
 from common import machine, save, stat_cpu_seconds
 
@@ -176,8 +181,13 @@ def main() -> None:
     ap.add_argument("--before", metavar="DIR", default=None,
                     help="--whole: also run each campaign from this checkout (a git worktree of "
                          "an earlier commit), interleaved, for a before/after in one run")
+    ap.add_argument("--open-session", type=int, default=0, metavar="N",
+                    help="--whole: also run each campaign N times from one open session "
+                         "(campaign_open_session.py)")
     args = ap.parse_args()
     print(f"campaign benchmark - {machine()}, load average {os.getloadavg()[0]:.1f} at the start")
+    if args.whole and args.open_session:
+        return open_sessions(args.whole, args.rounds, args.open_session)
     if args.whole:
         return whole_campaigns(args.whole, args.rounds, args.analysis,
                                Path(args.before).resolve() if args.before else None)
@@ -268,3 +278,22 @@ def _fmt(p: dict) -> str:
 
 if __name__ == "__main__":
     main()
+
+
+def open_sessions(names: list[str], rounds: int, runs: int) -> None:
+    """Each campaign `runs` times from one open session, `rounds` sessions; the session
+    with the median whole-session figure is printed in full."""
+    out: dict = {"machine": machine(), "rounds": rounds, "runs_per_session": runs}
+    for n in names:
+        path = Path(n).resolve() if Path(n).exists() else ROOT / "profiles" / "campaigns" / f"{n}.toml"
+        sessions = []
+        for r in range(rounds):
+            sessions.append(open_session(path, runs))
+            x = sessions[-1]
+            print(f"  round {r + 1} {path.stem}: first run {x['runs'][0]['device_per_wall']:.1f}x, "
+                  f"later runs {statistics.median(y['device_per_wall'] for y in x['runs'][1:]):.1f}x "
+                  f"(median), session {x['session_device_per_wall']:.1f}x, load {os.getloadavg()[0]:.1f}")
+        mid = sorted(sessions, key=lambda x: x["session_device_per_wall"])[len(sessions) // 2]
+        print_open_session(mid)
+        out[path.stem] = {"sessions": sessions}
+    print(f"written to {save('campaign_open_session', out)}")

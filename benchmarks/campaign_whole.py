@@ -48,6 +48,8 @@ def _cpu_and_kind(pid: int) -> tuple[float, str] | None:
         return None
     if "resource_tracker" in cmd:
         kind = "multiprocessing resource tracker"
+    elif "compress_behind" in cmd:
+        kind = "log compression behind the runs"
     elif "spawn_main" in cmd:
         kind = "log writer (spawned)"
     elif "campaign run" in cmd:
