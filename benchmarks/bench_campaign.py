@@ -276,10 +276,6 @@ def _fmt(p: dict) -> str:
     return ", ".join(f"{k[:-2]} {v:.2f} s" for k, v in p.items())
 
 
-if __name__ == "__main__":
-    main()
-
-
 def open_sessions(names: list[str], rounds: int, runs: int) -> None:
     """Each campaign `runs` times from one open session, `rounds` sessions; the session
     with the median whole-session figure is printed in full."""
@@ -297,3 +293,8 @@ def open_sessions(names: list[str], rounds: int, runs: int) -> None:
         print_open_session(mid)
         out[path.stem] = {"sessions": sessions}
     print(f"written to {save('campaign_open_session', out)}")
+
+
+if __name__ == "__main__":
+    main()
+

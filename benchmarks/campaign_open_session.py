@@ -40,8 +40,8 @@ def _session(campaign: Path, runs: int, folder: Path) -> dict:
     t0 = time.perf_counter()
     c = load_campaign(campaign)
     tb = Testbed("sim", testbed=c.testbed, fast=True, log_folder=folder, echo=lambda text: None)
+    tb.recording.prepare_ahead()       # as `campaign run` does: the writer starts with the device
     tb.__enter__()
-    tb.recording.prepare_ahead()
     out = {"open_s": time.perf_counter() - t0, "runs": []}
     for _ in range(runs):
         before = len(tb.recordings)

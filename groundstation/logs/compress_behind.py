@@ -57,6 +57,13 @@ class CompressBehind:
         self.submitted: list[Path] = []
         self.outcomes: list[CompressOutcome] = []
 
+    def prepare(self) -> None:
+        """Start the process now, ahead of the first log: its imports are done while
+        that log records, not at the end of a short campaign."""
+        with self._lock:
+            if self._proc is None:
+                self._start()
+
     def submit(self, paths) -> None:
         with self._lock:
             for path in map(Path, paths):

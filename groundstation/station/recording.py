@@ -59,6 +59,10 @@ class RecordingSlot:
                        writer_niceness=FAST_WRITER_NICENESS if fast else 0,
                        standby=self.standby, compression={} if fast else None)
         self._compress_later = fast
+        if fast and self.compress_behind is None:
+            from ..logs.compress_behind import CompressBehind
+            self.compress_behind = CompressBehind(echo=self.echo)
+            self.compress_behind.prepare()
         path = rec.start()
         try:
             if client is not None:
@@ -157,12 +161,8 @@ class RecordingSlot:
     def _compress(self, status) -> None:
         """A log recorded uncompressed and closed cleanly goes to the compression behind
         the session; one that ended otherwise stays exactly as recorded (evidence)."""
-        if not (self._compress_later and status.state == "stopped" and status.files):
-            return
-        if self.compress_behind is None:
-            from ..logs.compress_behind import CompressBehind
-            self.compress_behind = CompressBehind(echo=self.echo)
-        self.compress_behind.submit(status.files)
+        if self._compress_later and status.state == "stopped" and status.files:
+            self.compress_behind.submit(status.files)
 
     def finish_compression(self) -> None:
         """Wait for the logs compressed behind the session (Ctrl-C leaves the rest
