@@ -206,6 +206,15 @@ def _on_testbed(campaign, testbed: Path, dictionary):
 
 
 def _cmd_run(args) -> int:
+    from ..sim.launch_ahead import discard
+
+    try:
+        return _run(args)
+    finally:
+        discard()           # a simulator launched ahead that the session did not take
+
+
+def _run(args) -> int:
     from ..campaign import CampaignReport, CampaignRunner, load_campaign
     from ..campaign.run_setup import resolve_setup
     from ..core.dictionary import load_dictionary
@@ -215,6 +224,7 @@ def _cmd_run(args) -> int:
              if getattr(args, k) is not None}
     try:
         dictionary = load_dictionary(getattr(args, "protocol_dir", None))
+        _simulator_ahead(args, given, dictionary)
         c = load_campaign(args.file, dictionary)
         resume = CampaignReport.load(args.resume) if args.resume else None
         setup, notes = resolve_setup(given, resume.setup if resume else None,
@@ -273,6 +283,32 @@ def _cmd_run(args) -> int:
     if report.status == "interrupted":
         return EXIT_INTERRUPTED
     return EXIT_OK if report.status == "completed" else EXIT_FAILED
+
+
+def _simulator_ahead(args, given: dict, dictionary) -> None:
+    """With `--device sim --fast` (the simulator in a child process), launch that child
+    now, so that its start overlaps the campaign's check (sim/launch_ahead.py).  A guess
+    from the campaign file's testbed: when anything about it is off, nothing is launched
+    and the check says what is wrong; a child the session does not take is ended."""
+    from ..core.kinds import SIMULATED_DEVICE, FastSim
+    from ..core.tomlfile import read_toml
+    from ..plant.testbed import load_testbed
+    from ..sim.launch_ahead import launch_ahead
+    from ..station.rig import wants_simulated_generator
+
+    if (args.resume or not given.get("fast") or given.get("device", SIMULATED_DEVICE) != SIMULATED_DEVICE
+            or given.get("fast_sim", FastSim.PROCESS) != FastSim.PROCESS):
+        return
+    path = Path(args.file)
+    try:
+        testbed = Path(given["testbed"]) if given.get("testbed") else \
+            path.parent / read_toml(path, GroundStationError)[0]["campaign"]["testbed"]
+        inertial = load_testbed(testbed).inertial
+    except (GroundStationError, OSError, KeyError, TypeError, ValueError):
+        return
+    generator = None if args.generator == GeneratorChoice.NONE else args.generator
+    launch_ahead(dictionary, testbed=testbed, seed=given.get("seed", 0),
+                 generator=wants_simulated_generator(generator, inertial=inertial))
 
 
 def _campaign_testbed(args, c, setup: dict, folder: Path):

@@ -65,7 +65,7 @@ class SteppedSimulatorProcess:
                  start_timeout: float = START_TIMEOUT_S):
         self.dictionary = dictionary
         self.args = [sys.executable, "-m", "groundstation.sim.stepped_process",
-                     "--testbed", str(testbed), "--seed", str(int(seed)), "--host", host]
+                     "--testbed", str(Path(testbed).resolve()), "--seed", str(int(seed)), "--host", host]
         if generator:
             self.args.append("--generator")
         self.start_timeout = start_timeout
@@ -84,7 +84,12 @@ class SteppedSimulatorProcess:
         self._reader: threading.Thread | None = None
 
     # ------------------------------------------------------------------ lifecycle
-    def start(self) -> "SteppedSimulatorProcess":
+    def launch(self) -> "SteppedSimulatorProcess":
+        """Start the child's interpreter; `start()` waits until it is ready.  Its imports
+        and numba's cache take about half a second, which a caller with other work to
+        do meanwhile (checking a campaign) need not wait for: launch_ahead.py."""
+        if self.proc is not None:
+            return self
         parent_end, child_end = socket.socketpair()
         # the child's complaints go to a file: a pipe nobody reads could fill and block it
         self._stderr = tempfile.TemporaryFile()
@@ -98,6 +103,10 @@ class SteppedSimulatorProcess:
         finally:
             child_end.close()
         self._conn = Connection(parent_end.detach())
+        return self
+
+    def start(self) -> "SteppedSimulatorProcess":
+        self.launch()
         if not self._conn.poll(self.start_timeout):
             why = self._last_complaint()
             self.stop()

@@ -84,10 +84,12 @@ def start_simulator(testbed: str | Path | None, *, dictionary: Dictionary | None
         address = sim.start()
         local = LocalSimulator(address, sim.fg_resource, seed, parts=[sim])
     elif FastSim(fast_sim) is FastSim.PROCESS:
+        from ..sim.launch_ahead import take
         from ..sim.stepped_process import SteppedSimulatorProcess
 
-        device = SteppedSimulatorProcess(dictionary, testbed=_testbed_path(testbed), seed=seed,
-                                         generator=generator).start()
+        # one launched ahead for exactly this simulator, if any (sim/launch_ahead.py)
+        device = take(SteppedSimulatorProcess(dictionary, testbed=_testbed_path(testbed), seed=seed,
+                                              generator=generator)).start()
         local = LocalSimulator(f"127.0.0.1:{device.tcp_port}", device.fg_resource, seed,
                                stepped=device, parts=[device])
     else:
