@@ -264,7 +264,11 @@ def error_row(path: str | Path, error: str) -> dict[str, Any]:
 def run_serial(paths: list[Path], options: BatchOptions = BatchOptions(),
                known: dict[str, dict[str, Any]] | None = None,
                progress: Callable[[int, int], None] | None = None) -> list[dict[str, Any]]:
-    """Every log's row, in the order of `paths`, one after the other in this process."""
+    """Every log's row, in the order of `paths`, one after the other in this process
+    (with glibc's allocator set for it: analysis/allocator.py)."""
+    from .allocator import tune_for_batch
+
+    tune_for_batch()
     known = known or {}
     rows = []
     for i, p in enumerate(paths, 1):

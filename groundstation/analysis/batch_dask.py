@@ -93,9 +93,14 @@ def dask_client(scheduler: str = "local", workers: int = 2, *, listen: Listen | 
     # glibc's mmap threshold: every large numpy temporary is then mapped and unmapped
     # afresh.  Measured in a worker (24 logs of 60 s): 6,200-6,400 page faults and
     # 115 ms of the task thread's CPU per log, against 1,450-1,850 and 89-92 ms without
-    # it or in this process - the third of a log that made Dask lose to the loop.  Left
-    # unset here (a value the user exported still wins); one BLAS thread stays.
-    with dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_TRIM_THRESHOLD_": None}), \
+    # it or in this process - the third of a log that made Dask lose to the loop.  The
+    # workers get the serial loop's thresholds instead (analysis/allocator.py; a value
+    # the user exported still wins); one BLAS thread stays.
+    from .allocator import WORKER_ENVIRONMENT
+
+    environ = {f"distributed.nanny.pre-spawn-environ.{name}": os.environ.get(name, value)
+               for name, value in WORKER_ENVIRONMENT.items()}
+    with dask.config.set(environ), \
             LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=host,
                          scheduler_port=port, **http) as cluster, Client(cluster) as client:
         yield client
