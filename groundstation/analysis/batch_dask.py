@@ -98,9 +98,13 @@ def dask_client(scheduler: str = "local", workers: int = 2, *, listen: Listen | 
     # the user exported still wins); one BLAS thread stays.
     from .allocator import WORKER_ENVIRONMENT
 
-    environ = {f"distributed.nanny.pre-spawn-environ.{name}": os.environ.get(name, value)
-               for name, value in WORKER_ENVIRONMENT.items()}
-    with dask.config.set(environ), \
+    settings = {f"distributed.nanny.pre-spawn-environ.{name}": os.environ.get(name, value)
+                for name, value in WORKER_ENVIRONMENT.items()}
+    # a worker's profiler samples the task's stack 100 times a second for the
+    # dashboard's profile page: 3-4 % of a busy worker's CPU (measured, a 3 s task);
+    # off when there is no dashboard to show it
+    settings["distributed.worker.profile.enabled"] = dashboard is not None
+    with dask.config.set(settings), \
             LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=host,
                          scheduler_port=port, **http) as cluster, Client(cluster) as client:
         yield client
