@@ -161,8 +161,9 @@ class RecordingSlot:
     def _compress(self, status) -> None:
         """A log recorded uncompressed and closed cleanly goes to the compression behind
         the session; one that ended otherwise stays exactly as recorded (evidence)."""
-        if self._compress_later and status.state == "stopped" and status.files:
-            self.compress_behind.submit(status.files)
+        compressing = self.compress_behind
+        if self._compress_later and compressing is not None and status.state == "stopped" and status.files:
+            compressing.submit(status.files)
 
     def finish_compression(self) -> None:
         """Wait for the logs compressed behind the session (Ctrl-C leaves the rest
