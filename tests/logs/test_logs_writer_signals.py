@@ -26,6 +26,16 @@ def _has(mask: int, sig: int) -> bool:
     return bool(mask >> (sig - 1) & 1)
 
 
+@pytest.fixture(autouse=True)
+def _ctrl_c_as_in_a_terminal():
+    """Python's own Ctrl-C handler for these tests, whatever the suite inherited: a
+    suite started in the background of a non-interactive shell (`sh -c 'make test &'`)
+    begins with SIGINT ignored, and Python then leaves it ignored."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 def test_a_ctrl_c_during_the_writer_spawn_is_held_and_then_raised():
     before = signal.pthread_sigmask(signal.SIG_BLOCK, set())
     with pytest.raises(KeyboardInterrupt):
