@@ -141,9 +141,7 @@ class CompressBehind:
         return bool(self.pending())
 
     def _died_on(self, path: Path) -> None:
-        for tmp in leftovers(path):
-            with contextlib.suppress(OSError):
-                tmp.unlink()
+        _remove_leftovers(path)
         status = self._proc.returncode
         how = f"signal {-status}" if status < 0 else f"status {status}"
         with self._lock:
@@ -169,9 +167,7 @@ class CompressBehind:
         proc.stdout.close()
         left = self.pending()
         for path in left:
-            for tmp in leftovers(path):
-                with contextlib.suppress(OSError):
-                    tmp.unlink()
+            _remove_leftovers(path)
         if left:
             self.echo(f"{len(left)} log(s) left uncompressed (whole and readable); to compress "
                       f"them: groundstation log compress {' '.join(str(p) for p in left)}")
@@ -185,6 +181,13 @@ class CompressBehind:
         for o in self.outcomes:
             if o.state == FAILED or not self.background:
                 self.echo(o.text())
+
+
+def _remove_leftovers(path: Path) -> None:
+    """The temporary copy a compressing process that died mid-way left beside `path`."""
+    for tmp in leftovers(path):
+        with contextlib.suppress(OSError):
+            tmp.unlink()
 
 
 def _stop_on_sigterm(signum, frame) -> None:
