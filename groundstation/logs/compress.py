@@ -7,7 +7,8 @@ is written beside the original as a hidden temporary file, checked against it, f
 to the disk and renamed over it: at every moment the name holds a whole log, the
 uncompressed one or the compressed one.  A crash, a full disk or a damaged original
 leaves the original as it was and removes the temporary file (a SIGKILL leaves it: a
-hidden `.NAME.XXXXXXXX.part` beside the log, safe to delete).
+hidden `.NAME.<8 hex digits>.part` beside the log (atomic.leftovers finds it), safe
+to delete).
 
 What is copied: every group, dataset and attribute, in the layout and with the chunk
 shape they had; the chunked datasets (the per-frame columns, the byte streams, the
@@ -74,7 +75,7 @@ def compress_log(path: str | Path, compression: dict | None = None) -> CompressO
     try:
         size = path.stat().st_size
         why_not = _why_not(path, compression)
-    except (OSError, *H5_READ_ERRORS) as exc:
+    except H5_READ_ERRORS as exc:                # OSError among them
         return CompressOutcome(path, FAILED, note=f"cannot read it as a log: {_describe(exc)}")
     if why_not:
         return CompressOutcome(path, SKIPPED, size, size, why_not)
@@ -90,7 +91,7 @@ def compress_log(path: str | Path, compression: dict | None = None) -> CompressO
             _flush_to_disk(tmp)
         _flush_to_disk(path.parent)
         return CompressOutcome(path, COMPRESSED, size, path.stat().st_size)
-    except (GroundStationError, OSError, *H5_READ_ERRORS) as exc:
+    except (GroundStationError, *H5_READ_ERRORS) as exc:
         return CompressOutcome(path, FAILED, note=f"left as recorded: {_describe(exc)}")
 
 

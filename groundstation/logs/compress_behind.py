@@ -77,7 +77,7 @@ class CompressBehind:
             self._proc.stdin.write(f"{path}\n".encode())
             self._proc.stdin.flush()
         except (OSError, ValueError):
-            pass          # it has ended: finish() hands what it did not answer to a new one
+            return        # it has ended: finish() hands what it did not answer to a new one
 
     def _start(self) -> None:
         args = [sys.executable, "-m", "groundstation.logs.compress_behind"]
