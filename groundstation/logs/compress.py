@@ -27,7 +27,9 @@ rewrite the file's format bounds (schema.LIBVER); h5py does the same copy here.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import mmap
 import os
 import shutil
 from dataclasses import dataclass
@@ -39,6 +41,7 @@ import numpy as np
 from ..core.errors import GroundStationError
 from . import schema
 from .atomic import atomic_output
+from .chunk_deflate import chunk_encoder, copy_chunks
 from .opening import H5_READ_ERRORS
 
 #: bytes read and written per step of a dataset's copy (whole chunks): bounds the memory
@@ -119,7 +122,8 @@ def _why_not(path: Path, compression: dict) -> str:
 
 
 def _copy(source: Path, target: Path, compression: dict) -> None:
-    with h5py.File(source, "r") as src, h5py.File(target, "w", libver=schema.LIBVER) as dst:
+    with h5py.File(source, "r") as src, h5py.File(target, "w", libver=schema.LIBVER) as dst, \
+            _mapped(source, src) as file_bytes:
         _copy_attrs(src, dst)
         dst.attrs["compression"] = json.dumps(compression)
 
@@ -129,9 +133,24 @@ def _copy(source: Path, target: Path, compression: dict) -> None:
             elif obj.chunks is None:
                 src.copy(obj, dst, name)            # a text: as it is, attributes and all
             else:
-                _copy_dataset(obj, dst, name, compression)
+                _copy_dataset(obj, dst, name, compression, file_bytes)
 
         src.visititems(visit)
+
+
+@contextlib.contextmanager
+def _mapped(path: Path, opened: h5py.File):
+    """The file's bytes mapped read-only, where HDF5's addresses are offsets in it (no
+    user block), else None."""
+    if opened.userblock_size != 0 or path.stat().st_size == 0:
+        yield None
+        return
+    with open(path, "rb") as fh, mmap.mmap(fh.fileno(), 0, access=mmap.ACCESS_READ) as mapped:
+        view = memoryview(mapped)
+        try:
+            yield view
+        finally:
+            view.release()
 
 
 def _copy_attrs(src, dst) -> None:
@@ -139,21 +158,24 @@ def _copy_attrs(src, dst) -> None:
         dst.attrs.create(name, src.attrs[name], dtype=src.attrs.get_id(name).dtype)
 
 
-def _copy_dataset(ds: h5py.Dataset, dst: h5py.File, name: str, compression: dict) -> None:
+def _copy_dataset(ds: h5py.Dataset, dst: h5py.File, name: str, compression: dict,
+                  file_bytes: memoryview | None) -> None:
     out = dst.create_dataset(name, shape=ds.shape, maxshape=ds.maxshape, dtype=ds.dtype,
-                             chunks=ds.chunks, **compression)
+                             chunks=ds.chunks, fillvalue=ds.fillvalue, **compression)
     _copy_attrs(ds, out)
-    row_bytes = max(1, ds.dtype.itemsize * int(np.prod(ds.shape[1:], dtype=np.int64)))
-    step = max(1, COPY_BYTES // (row_bytes * ds.chunks[0])) * ds.chunks[0]
-    for start in range(0, ds.shape[0], step):
-        stop = min(start + step, ds.shape[0])
-        out[start:stop] = ds[start:stop]
+    encode = chunk_encoder(ds, out)
+    if encode is not None:                  # stored chunks deflated as they are: chunk_deflate.py
+        copy_chunks(ds, out, encode, file_bytes)
+        return
+    for rows in _steps(ds):
+        out[rows] = ds[rows]
 
 
 def _check_copy(source: Path, target: Path) -> None:
     """The copy has every object of the original, with its type, shape and attributes
-    (the root's compression apart): a mistake here would otherwise replace a log with
-    less than it had."""
+    (the root's compression apart), and each chunked dataset's ends read back through
+    HDF5 as the original's do: a mistake here would otherwise replace a log with less
+    than it had."""
     with h5py.File(source, "r") as src, h5py.File(target, "r") as dst:
         def compare(name: str, obj) -> None:
             other = dst.get(name)
@@ -163,10 +185,29 @@ def _check_copy(source: Path, target: Path) -> None:
                 raise LogCompressError(f"the compressed copy of /{name} differs in shape or type")
             if sorted(other.attrs) != sorted(obj.attrs):
                 raise LogCompressError(f"the compressed copy of /{name} differs in its attributes")
+            if isinstance(obj, h5py.Dataset) and obj.chunks is not None and not _same_values(obj, other):
+                raise LogCompressError(f"the compressed copy of /{name} reads back different values")
 
         src.visititems(compare)
         if sorted(dst.attrs) != sorted(src.attrs) or len(dst) != len(src):
             raise LogCompressError("the compressed copy differs at its root")
+
+
+def _same_values(original: h5py.Dataset, copy: h5py.Dataset) -> bool:
+    """The first and the last chunk's rows read back byte for byte (NaN included).  A
+    mistake in how a chunk is encoded or stored (chunk_deflate.py) would be the same in
+    every chunk, so the two ends find it without inflating the whole log again."""
+    n, rows = original.shape[0], original.chunks[0]
+    last = (max(n - 1, 0) // rows) * rows
+    ends = [slice(0, min(rows, n))] + ([slice(last, n)] if last > 0 else [])
+    return all(original[s].tobytes() == copy[s].tobytes() for s in ends)
+
+
+def _steps(ds: h5py.Dataset):
+    row_bytes = max(1, ds.dtype.itemsize * int(np.prod(ds.shape[1:], dtype=np.int64)))
+    step = max(1, COPY_BYTES // (row_bytes * ds.chunks[0])) * ds.chunks[0]
+    for start in range(0, ds.shape[0], step):
+        yield slice(start, min(start + step, ds.shape[0]))
 
 
 def _flush_to_disk(path: Path) -> None:
