@@ -9,6 +9,7 @@ the caller's thread and wait for their verification stages (SPEC.md, "Commands")
 
 from __future__ import annotations
 
+import ipaddress
 import logging
 import random
 import re
@@ -113,6 +114,10 @@ class DeviceClient(TelemetryOutlet):
         self._session_stop = threading.Event()
         self._draining = threading.Event()
         self._drained = threading.Event()
+        #: the quiet time that ends the drain at close: a datagram sent before the
+        #: DISCONNECT's answer may still be on the wire behind it, but not on loopback,
+        #: where the kernel has queued it before the sender's call returned
+        self.drain_quiet_s = 0.0 if _on_loopback(getattr(command_link, "peer", None)) else 0.1
         self.session_token: int | None = None
         self.device_info: dict[str, Any] = {}
         self.link_state = LinkState.CLOSED
@@ -219,9 +224,11 @@ class DeviceClient(TelemetryOutlet):
     def _read_datagrams(self) -> None:
         assert self.telemetry is not None and self._datagrams is not None
         while not self._stop.is_set():
+            draining = self._draining.is_set()    # then until quiet (drain_quiet_s)
             try:
                 datagrams, times, sources = self.telemetry.receive_from(
-                    0.1, coalesce_s=self.telemetry_batch_s)
+                    self.drain_quiet_s if draining else 0.1,
+                    coalesce_s=0.0 if draining else self.telemetry_batch_s)
             except LinkLostError as exc:
                 if not self._stop.is_set():
                     self._lost(str(exc))
@@ -231,7 +238,7 @@ class DeviceClient(TelemetryOutlet):
                 self._tap("datagram", datagrams, times)
             if datagrams:
                 self._dispatch(self._datagrams.decode(datagrams, times), "datagram")
-            elif self._draining.is_set():
+            elif draining:
                 self._drained.set()         # nothing left in the socket after the session ended
 
     def _lost(self, message: str) -> None:
@@ -548,6 +555,7 @@ class DeviceClient(TelemetryOutlet):
             # the device stopped its telemetry at DISCONNECT; what it sent before is still
             # in the socket: let the reader hand it on before the socket closes
             self._draining.set()
+            self.telemetry.wake()           # a reader waiting for more stops waiting
             self._drained.wait(0.5)
         self._stop.set()
         self.command_link.close()
@@ -564,3 +572,10 @@ class DeviceClient(TelemetryOutlet):
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def _on_loopback(peer) -> bool:
+    try:
+        return peer is not None and ipaddress.ip_address(peer[0]).is_loopback
+    except ValueError:
+        return False

@@ -7,8 +7,10 @@ the backend's _read()/_write(), so byte accounting and logging live in one place
 
 from __future__ import annotations
 
+import contextlib
 import errno
 import logging
+import select
 import socket
 import struct
 import sys
@@ -213,6 +215,15 @@ class UdpReceiver:
         self.closed = False
         #: the last receive_from() stopped at max_datagrams: more were waiting
         self.backlog = False
+        # wake(): a socket pair the wait watches beside the telemetry socket, because
+        # closing a socket from another thread does not end a recv already waiting on
+        # it (the reader would sleep out its timeout, at every session's close)
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._wake_r.setblocking(False)
+        self._wake_w.setblocking(False)
+        self._poll = select.poll()
+        self._poll.register(self._sock, select.POLLIN)
+        self._poll.register(self._wake_r, select.POLLIN)
 
     def _recv(self) -> tuple[bytes, float, tuple[str, int]]:
         if not self.kernel_timestamps:
@@ -247,10 +258,12 @@ class UdpReceiver:
         out: list[bytes] = []
         times: list[float] = []
         sources: list[tuple[str, int]] = []
+        if not self._wait(timeout):
+            return out, times, sources
         try:
-            self._sock.settimeout(timeout)
+            self._sock.setblocking(False)
             data, when, addr = self._recv()
-        except socket.timeout:
+        except BlockingIOError:                       # woken, nothing queued
             return out, times, sources
         except OSError as exc:
             if self.closed:
@@ -262,7 +275,6 @@ class UdpReceiver:
         if coalesce_s > 0 and not self.backlog:
             time.sleep(coalesce_s)
         try:
-            self._sock.setblocking(False)
             while len(out) < max_datagrams:
                 data, when, addr = self._recv()
                 out.append(data)
@@ -275,6 +287,32 @@ class UdpReceiver:
         self.bytes_read += sum(len(d) for d in out)
         return out, times, sources
 
+    def _wait(self, timeout: float) -> bool:
+        """Up to `timeout` s for a datagram or a wake(); False when neither came (or the
+        receiver is closed)."""
+        if self.closed:
+            return False
+        try:
+            ready = self._poll.poll(max(0.0, timeout) * 1000.0)
+        except (OSError, ValueError):                 # closed meanwhile
+            return False
+        woken = any(fd == self._wake_r.fileno() for fd, _ in ready)
+        if woken:
+            with contextlib.suppress(OSError):
+                while self._wake_r.recv(64):
+                    pass
+        return bool(ready) and not self.closed
+
+    def wake(self) -> None:
+        """End a receive_from() waiting now (or the next one) at once, with whatever is
+        queued: what a reader needs to drain the socket, or to stop, without waiting out
+        its timeout."""
+        with contextlib.suppress(OSError):            # a full pair is woken already
+            self._wake_w.send(b"\0")
+
     def close(self) -> None:
         self.closed = True
+        self.wake()
         self._sock.close()
+        self._wake_r.close()
+        self._wake_w.close()

@@ -461,3 +461,46 @@ def test_udp_batches_keep_each_datagrams_arrival_time():
         # so it holds on a busy machine too.
         assert times[0] <= between <= times[1]
     assert times[0] >= sent_at - 1.0
+
+
+def test_a_wake_ends_a_receive_waiting_for_telemetry():
+    """Closing a socket does not end a recv another thread waits in; wake() does, so a
+    session's close does not sleep out the reader's timeout (bounded join: a reader
+    still waiting for its 60 s would fail the test, not hang it)."""
+    rx = UdpReceiver("127.0.0.1", 0)
+    got = []
+    reader = threading.Thread(target=lambda: got.append(rx.receive(60.0)), daemon=True)
+    try:
+        reader.start()
+        rx.wake()
+        reader.join(30.0)
+        assert not reader.is_alive()
+        assert got == [([], [])]
+        reader = threading.Thread(target=lambda: got.append(rx.receive(60.0)), daemon=True)
+        reader.start()
+        rx.close()                          # a close wakes it too
+        reader.join(30.0)
+        assert not reader.is_alive()
+    finally:
+        rx.close()
+
+
+def test_closing_hands_on_every_frame_already_queued_on_loopback(client, device):
+    """On loopback the drain at close reads what is queued without waiting for quiet
+    (the device's datagrams are in the socket before its answer): none is lost."""
+    assert client.drain_quiet_s == 0.0
+    blocks = collect(client)
+    client.connect()
+    first = device._seq["HIGH_RATE"]
+    device.run_ticks(1200)
+    sent = device._seq["HIGH_RATE"] - first
+    client.close()
+    assert sent == 1200
+    assert frames_of(blocks, "HIGH_RATE") == sent
+
+
+def test_a_remote_device_is_drained_until_quiet():
+    from groundstation.link.client import _on_loopback
+    assert _on_loopback(("127.0.0.1", 5020)) and _on_loopback(("::1", 5020, 0, 0))
+    assert not _on_loopback(("192.168.1.20", 5020)) and not _on_loopback(None)
+    assert not _on_loopback(("not-an-address", 1))

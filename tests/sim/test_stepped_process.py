@@ -38,6 +38,9 @@ def test_the_child_steps_and_reports_the_ticks_it_ran(child):
     assert child.step(1) == 916
     child.sync()
     assert not child.faulted
+    proc = child.proc
+    child.stop()                     # asked to end, it ends at once and says all is well
+    assert proc.returncode == 0
 
 
 def test_a_confirmation_period_is_reported_before_the_next_reply(child, dictionary):
