@@ -1,7 +1,8 @@
 """What a process pays at its start: a log writer imports the file layout and the codec,
 not the reader, export, replay or the link; the console script's entry point imports no
-command group; checking a name against the analysis imports no scipy.  Each is checked
-in a fresh interpreter (the modules a process has loaded, not a timing)."""
+command group; checking a name against the analysis imports no scipy; a session whose
+simulator is a child process imports no engine.  Each is checked in a fresh interpreter
+(the modules a process has loaded, not a timing)."""
 
 from __future__ import annotations
 
@@ -63,3 +64,19 @@ def test_dir_lists_a_name_before_its_first_use(package, name):
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True, timeout=120).stdout
     assert json.loads(out.splitlines()[-1]) == [True, False]    # listed, not yet imported
+
+
+def test_a_session_with_the_simulator_in_a_child_imports_no_engine():
+    """`campaign run --fast`: the engine (numba, the plant's model) is the child's; the
+    ground station's process imports the child's handle and the session only."""
+    loaded = _loaded_after("from groundstation.sim.launch_ahead import launch_ahead\n"
+                           "from groundstation.sim.stepped_process import SteppedSimulatorProcess\n"
+                           "import groundstation.station.station, groundstation.campaign.runner")
+    assert "groundstation.sim.stepped_process" in loaded
+    for heavy in ("numba", "groundstation.sim.device", "groundstation.sim.engine"):
+        assert heavy not in loaded, heavy
+
+
+def test_the_simulators_names_still_come_from_the_package():
+    loaded = _loaded_after("from groundstation.sim import SimulatedDevice, Firmware")
+    assert {"groundstation.sim.device", "groundstation.sim.firmware", "numba"} <= loaded
