@@ -104,6 +104,14 @@ def dask_client(scheduler: str = "local", workers: int = 2, *, listen: Listen | 
     # dashboard's profile page: 3-4 % of a busy worker's CPU (measured, a 3 s task);
     # off when there is no dashboard to show it
     settings["distributed.worker.profile.enabled"] = dashboard is not None
+    if dashboard is None:
+        # every process of the cluster wakes its event loop 50 times a second to see
+        # whether it was blocked, and samples its CPU and memory twice a second for the
+        # dashboard's plots.  In a worker each wake-up takes the interpreter's lock from
+        # the task thread; on 2 cores, 8 one-hour logs ran 3-5 % faster with both slowed
+        # (docs/scale.md, "Fourth round").  With a dashboard they stay as they were.
+        settings["distributed.admin.tick.interval"] = "1s"
+        settings["distributed.admin.system-monitor.interval"] = "5s"
     with dask.config.set(settings), \
             LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, host=host,
                          scheduler_port=port, **http) as cluster, Client(cluster) as client:

@@ -130,6 +130,13 @@ def _worker_environment() -> tuple[str | None, str | None, str | None]:
             os.environ.get("OPENBLAS_NUM_THREADS"))
 
 
+def _worker_settings() -> tuple[str, str, bool]:
+    import dask
+    return (dask.config.get("distributed.admin.tick.interval"),
+            dask.config.get("distributed.admin.system-monitor.interval"),
+            dask.config.get("distributed.worker.profile.enabled"))
+
+
 class _UnloadableInAWorker:
     """Pickles to int('not a number'): a worker cannot load the task that carries it,
     so the task fails there as a worker dying on a log would - with no flakiness."""
@@ -149,6 +156,9 @@ def test_logs_grouped_in_tasks_give_the_serial_table_and_a_failed_task_its_logs_
         # (analysis/allocator.py); one BLAS thread kept
         assert set(client.run(_worker_environment).values()) == {
             (str(TRIM_THRESHOLD_BYTES), str(MMAP_THRESHOLD_BYTES), "1")}
+        # no dashboard: no profiler, and the event loops' watchdog and the system
+        # monitor slowed, which take the interpreter's lock from the task thread
+        assert set(client.run(_worker_settings).values()) == {("1s", "5s", False)}
         grouped = run_on(client, paths, OPTIONS, known, tasks=2,
                          progress=lambda done, total: seen.append((done, total)))
         hit = run_on(client, paths, OPTIONS, poisoned, tasks=2)
