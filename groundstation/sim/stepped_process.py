@@ -98,6 +98,7 @@ class SteppedSimulatorProcess:
             self.proc = subprocess.Popen(
                 self.args + ["--fd", str(child_end.fileno())], pass_fds=(child_end.fileno(),),
                 stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=self._stderr,
+                env=_child_environment(),
                 # its own session: the terminal's Ctrl-C is for the ground station, which
                 # makes the rig safe over the link and then stops this child itself
                 start_new_session=True)
@@ -271,6 +272,16 @@ class SteppedSimulatorProcess:
     def faulted(self) -> bool:
         """Whether the firmware's fault was latched when the child last answered."""
         return bool(self._fault)
+
+
+def _child_environment() -> dict[str, str]:
+    """This process's environment with one BLAS thread set (core/blas_threads.py): the
+    command line has set it already, a notebook or a script holding a Testbed may not."""
+    from ..core.blas_threads import one_blas_thread
+
+    env = dict(os.environ)
+    one_blas_thread(env)
+    return env
 
 
 # ---------------------------------------------------------------------- the child
