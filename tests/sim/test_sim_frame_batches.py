@@ -91,8 +91,20 @@ def _packet_bytes(codec, stream: bytes, packet: str = "HIGH_RATE") -> bytes:
                     for b in blocks if b.name == packet)
 
 
-def _fast(dictionary, periods: int, batch: int | None) -> bytes:
-    dev = SimulatedDevice(dictionary, pacing="manual", seed=1)
+def _fast(dictionary, periods: int, batch: int | None, generator: bool = False,
+          testbed: str | None = None) -> bytes:
+    firmware = None
+    if testbed is not None:
+        from groundstation.plant.testbed import TESTBEDS_DIR, load_testbed
+        from groundstation.sim.firmware import Firmware
+        firmware = Firmware(dictionary, seed=1, testbed=load_testbed(TESTBEDS_DIR / testbed))
+    dev = SimulatedDevice(dictionary, pacing="manual", seed=1, firmware=firmware)
+    if generator:           # the base stage driven by a 7 Hz sine, evaluated per batch
+        from groundstation.sim.fg_instrument import SimulatedGenerator
+        gen = SimulatedGenerator(tick_source=lambda: dev.firmware.tick,
+                                 control_rate_hz=dictionary.control_rate_hz, base_channel=1)
+        assert gen.handle_line("C1:BSWV WVTP,SINE,FRQ,7,AMP,0.8;C1:OUTP ON;*ESR?") == ["0"]
+        dev.base_drive = gen.base_drive
     out: list[bytes] = []
     dev.run_fast(periods / dictionary.control_rate_hz, out.append, batch=batch)
     return b"".join(out)
@@ -109,6 +121,17 @@ def test_fast_output_is_the_same_at_any_batch_size(dictionary):
                 (batch, packet)
     assert len(_packet_bytes(codec, whole, "HOUSEKEEPING")) == \
         periods // 120 * dictionary.packet("HOUSEKEEPING").frame_dtype.itemsize
+
+
+def test_a_driven_base_is_the_same_at_any_batch_size(dictionary):
+    """The generator's output is evaluated once per batch, sliced per piece: the frames
+    do not depend on where the batches are cut, and the drive moves the base."""
+    periods, testbed = 1500, "inertial_2dof.toml"            # a testbed with a base stage
+    codec = FrameCodec(dictionary)
+    whole = _packet_bytes(codec, _fast(dictionary, periods, None, True, testbed))
+    for batch in (1, 7, 500):
+        assert _packet_bytes(codec, _fast(dictionary, periods, batch, True, testbed)) == whole, batch
+    assert whole != _packet_bytes(codec, _fast(dictionary, periods, None, False, testbed))
 
 
 @pytest.mark.parametrize("datagram_bytes", [0, 32768])
