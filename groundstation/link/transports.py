@@ -218,6 +218,7 @@ class UdpReceiver:
         # wake(): a socket pair the wait watches beside the telemetry socket, because
         # closing a socket from another thread does not end a recv already waiting on
         # it (the reader would sleep out its timeout, at every session's close)
+        self._sock.setblocking(False)          # reads follow _wait(), which does the waiting
         self._wake_r, self._wake_w = socket.socketpair()
         self._wake_r.setblocking(False)
         self._wake_w.setblocking(False)
@@ -261,7 +262,6 @@ class UdpReceiver:
         if not self._wait(timeout):
             return out, times, sources
         try:
-            self._sock.setblocking(False)
             data, when, addr = self._recv()
         except BlockingIOError:                       # woken, nothing queued
             return out, times, sources

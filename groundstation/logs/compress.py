@@ -13,7 +13,9 @@ to delete).
 What is copied: every group, dataset and attribute, in the layout and with the chunk
 shape they had; the chunked datasets (the per-frame columns, the byte streams, the
 journal) get `schema.COMPRESSION`, the others (the protocol and testbed texts) are
-copied as they are.  The root's `compression` attribute says what the file now has.
+copied as they are.  The chunks are deflated as stored, by ISA-L, outside HDF5's
+filter pipeline (chunk_deflate.py); a layout it does not reproduce goes through h5py.
+The root's `compression` attribute says what the file now has.
 
 HDF5 after a failed write is not to be trusted (a full disk can end in a crash of the
 library rather than an error): this runs in a process of its own, the compressing

@@ -2,9 +2,9 @@
 
 The names below are imported on first use (PEP 562): a session whose simulator runs in a
 child process (`--fast`, sim/stepped_process.py) imports this package for the child's
-handle only, and must not pay the engine's imports - numba, the plant's scipy.linalg -
-that only the child uses (about 0.4 s of CPU at every `campaign run`'s start, on its
-critical path: docs/campaigns.md, "Fifth round").
+handle only, and must not pay the engine's imports - numba and the compiled core - that
+only the child uses (in a py-spy profile, about 0.4 s of a `campaign run`'s start, on
+its critical path: docs/campaigns.md, "Fifth round").
 """
 
 from __future__ import annotations

@@ -112,3 +112,18 @@ def test_pipelines_it_does_not_reproduce_are_left_to_h5py(tmp_path):
         assert chunk_encoder(r["f8"], other_chunks) is None       # chunks of another shape
         assert chunk_encoder(p["f8"], same) is None               # a source already filtered
         assert chunk_encoder(r["f8"], same) is not None
+
+
+def test_a_chunk_that_is_not_whole_is_refused_not_written(tmp_path):
+    """A chunk address past the end of the file (a damaged index) would slice a short
+    chunk: it is refused with the dataset's name, before anything of it is written."""
+    raw = tmp_path / "raw.h5"
+    _write(raw, {})
+    with h5py.File(raw, "r") as src, h5py.File(tmp_path / "t.h5", "w") as dst:
+        ds = src["f8"]
+        out = dst.create_dataset("f8", shape=ds.shape, maxshape=ds.maxshape, dtype=ds.dtype,
+                                 chunks=ds.chunks, **schema.COMPRESSION)
+        short = memoryview(raw.read_bytes())[:2048]          # the file cut short
+        with pytest.raises(OSError, match="f8: the chunk at .* bytes where an uncompressed"):
+            copy_chunks(ds, out, chunk_encoder(ds, out), short)
+        assert out.id.get_num_chunks() == 0
