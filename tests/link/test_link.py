@@ -486,9 +486,10 @@ def test_a_wake_ends_a_receive_waiting_for_telemetry():
 
 
 def test_closing_hands_on_every_frame_already_queued_on_loopback(client, device):
-    """On loopback the drain at close reads what is queued without waiting for quiet
-    (the device's datagrams are in the socket before its answer): none is lost."""
-    assert client.drain_quiet_s == 0.0
+    """On loopback the drain at close waits a short quiet time only (the device's
+    datagrams are in the socket before its answer, or just after on a busy machine):
+    none is lost."""
+    assert client.drain_quiet_s < 0.1
     blocks = collect(client)
     client.connect()
     first = device._seq["HIGH_RATE"]
