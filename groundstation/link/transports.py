@@ -296,11 +296,9 @@ class UdpReceiver:
             ready = self._poll.poll(max(0.0, timeout) * 1000.0)
         except (OSError, ValueError):                 # closed meanwhile
             return False
-        woken = any(fd == self._wake_r.fileno() for fd, _ in ready)
-        if woken:
-            with contextlib.suppress(OSError):
-                while self._wake_r.recv(64):
-                    pass
+        if any(fd == self._wake_r.fileno() for fd, _ in ready):
+            with contextlib.suppress(OSError):    # a byte per wake(), a handful at most
+                self._wake_r.recv(4096)
         return bool(ready) and not self.closed
 
     def wake(self) -> None:
