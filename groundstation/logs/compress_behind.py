@@ -136,9 +136,13 @@ class CompressBehind:
         with contextlib.suppress(OSError):
             proc.stdin.close()
         proc.wait()
+        self._collect(proc)
+        return bool(self.pending())
+
+    def _collect(self, proc: subprocess.Popen) -> None:
+        """After the process ended: every answer it wrote read, its pipe closed."""
         self._reader.join(STOP_WAIT_S)
         proc.stdout.close()
-        return bool(self.pending())
 
     def _died_on(self, path: Path) -> None:
         _remove_leftovers(path)
@@ -163,8 +167,7 @@ class CompressBehind:
             except subprocess.TimeoutExpired:
                 proc.kill()
                 proc.wait()
-        self._reader.join(STOP_WAIT_S)
-        proc.stdout.close()
+        self._collect(proc)
         left = self.pending()
         for path in left:
             _remove_leftovers(path)

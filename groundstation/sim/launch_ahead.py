@@ -32,8 +32,6 @@ def launch_ahead(dictionary, *, testbed, seed: int = 0, generator: bool = False)
     device = SteppedSimulatorProcess(dictionary, testbed=testbed, seed=seed, generator=generator)
     device.launch()
     with _lock:
-        if not _waiting:
-            atexit.register(discard)
         _waiting.append(device)
 
 
@@ -55,3 +53,6 @@ def discard() -> None:
         _waiting.clear()
     for device in left:
         device.stop()
+
+
+atexit.register(discard)          # a child launched ahead never outlives the command

@@ -35,9 +35,9 @@ class RecordingSlot:
         self._t0 = 0.0
         #: the log writers started ahead (prepare_ahead), or None
         self.standby = None
-        #: the process compressing a fast session's logs behind it, or None
+        #: the process compressing a fast session's logs behind it (made by its first
+        #: recording), or None
         self.compress_behind = None
-        self._compress_later = False
 
     @property
     def active(self) -> bool:
@@ -58,7 +58,6 @@ class RecordingSlot:
                        chunk_rows=FAST_CHUNK_ROWS if fast else None,
                        writer_niceness=FAST_WRITER_NICENESS if fast else 0,
                        standby=self.standby, compression={} if fast else None)
-        self._compress_later = fast
         if fast and self.compress_behind is None:
             from ..logs.compress_behind import CompressBehind
             self.compress_behind = CompressBehind(echo=self.echo)
@@ -160,9 +159,10 @@ class RecordingSlot:
 
     def _compress(self, status) -> None:
         """A log recorded uncompressed and closed cleanly goes to the compression behind
-        the session; one that ended otherwise stays exactly as recorded (evidence)."""
+        the session (a log the writer deflated itself would be skipped there); one that
+        ended otherwise stays exactly as recorded (evidence)."""
         compressing = self.compress_behind
-        if self._compress_later and compressing is not None and status.state == "stopped" and status.files:
+        if compressing is not None and status.state == "stopped" and status.files:
             compressing.submit(status.files)
 
     def finish_compression(self) -> None:
