@@ -38,7 +38,7 @@ import io
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from .comparison import cell_text, compare
 from .metrics_words import (csv_variable, describe, group_text, invalid_reason, label,
@@ -47,6 +47,9 @@ from .metrics_words import (csv_variable, describe, group_text, invalid_reason, 
 from .model import AnalysisSpec, Campaign
 from .report import CampaignReport
 from .scoring import make_row, score_log_with_results
+
+if TYPE_CHECKING:
+    from .scoring_behind import ScoringBehind
 
 
 @dataclass
@@ -176,11 +179,13 @@ class CampaignMetrics:
 
 # ---------------------------------------------------------------------- scoring
 def campaign_metrics(report: CampaignReport, campaign: Campaign | None = None, *,
-                     folder: str | Path | None = None) -> CampaignMetrics:
+                     folder: str | Path | None = None,
+                     scored: "ScoringBehind | None" = None) -> CampaignMetrics:
     """Score every log of every recording in `report` and compare them as `campaign`'s
     [analysis] table asks (None: whole logs, default sensor, no comparison).  A log no
     longer where the report says is looked for in `folder` (the report's own folder,
-    moved with its logs)."""
+    moved with its logs).  A log `scored` has scored already, while the campaign ran
+    (scoring_behind.py, the same analysis), is taken from there."""
     spec = campaign.analysis if campaign is not None else AnalysisSpec()
     matrix = dict(campaign.matrix) if campaign is not None else {}
     rows: list[dict[str, Any]] = []
@@ -195,11 +200,16 @@ def campaign_metrics(report: CampaignReport, campaign: Campaign | None = None, *
         for part, f in enumerate(files, 1):
             if folder is not None and not Path(f).exists() and (Path(folder) / Path(f).name).exists():
                 f = str(Path(folder) / Path(f).name)
-            row, data[len(rows)] = score_log_with_results(f, spec, report.campaign, run, variables,
-                                          recording=str(rec.get("name", "")),
-                                          part=part if len(files) > 1 else None,
-                                          run_status=run_status(report, run),
-                                          design_dir=campaign.path.parent if campaign else None)
+            name, numbered, status = str(rec.get("name", "")), part if len(files) > 1 else None, \
+                run_status(report, run)
+            ahead = scored.take(f, run, variables, name, numbered) if scored is not None else None
+            if ahead is not None:
+                row, data[len(rows)] = ahead
+                row["run_status"] = status
+            else:
+                row, data[len(rows)] = score_log_with_results(
+                    f, spec, report.campaign, run, variables, recording=name, part=numbered,
+                    run_status=status, design_dir=campaign.path.parent if campaign else None)
             rows.append(row)
         if not files:
             rows.append(make_row(str(rec.get("name", "")), "", None, run, variables,

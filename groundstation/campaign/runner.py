@@ -5,7 +5,8 @@ with the rig made safe, or - with on_run_failure = "next_run" - ends only that r
 Every recording the report lists carries the run it ended in ("run": 1, 2, ...; 0 in
 setup or teardown) and that run's matrix values ("variables": each matrix key and, for
 a text value, its KEY_stem), so that the logs' metrics can be grouped by them
-(campaign/metrics.py) - recordings closed by a failure or Ctrl-C as well."""
+(campaign/metrics.py) - recordings closed by a failure or Ctrl-C as well.  `on_recording` is handed each one, so
+tagged, as soon as it ends (scoring_behind.py scores its logs while the next run records)."""
 
 from __future__ import annotations
 
@@ -28,11 +29,13 @@ class CampaignRunner:
     """Runs a Campaign on a Testbed (already open), step by step."""
 
     def __init__(self, campaign: Campaign, testbed, *, max_step_seconds: float | None = None,
-                 progress: Callable[[Step, float], None] | None = None):
+                 progress: Callable[[Step, float], None] | None = None,
+                 on_recording: Callable[[dict[str, Any]], None] | None = None):
         self.campaign = campaign
         self.tb = testbed
         self.max_step_seconds = max_step_seconds
         self.progress = progress or (lambda step, fraction: None)
+        self.on_recording = on_recording
         self._tags: dict[int, dict[str, Any]] = {}     # index in tb.recordings -> run, variables
         self._tagged = 0                                # tb.recordings[:_tagged] have their tags
 
@@ -129,14 +132,18 @@ class CampaignRunner:
         tags = run_tags(self.campaign, step)
         for i in range(self._tagged, len(recordings)):
             self._tags[i] = tags
+            if self.on_recording is not None:
+                self.on_recording(self._tagged_recording(i, recordings[i]))
         self._tagged = max(self._tagged, len(recordings))
 
     def _recordings(self, since: int) -> list[dict[str, Any]]:
-        out = []
-        for i, rec in enumerate(list(self.tb.recordings[since:]), since):
-            tags = self._tags.get(i, {"run": 0, "variables": {}})
-            out.append({**rec, "run": tags["run"], "variables": dict(tags["variables"])})
-        return out
+        return [self._tagged_recording(i, rec)
+                for i, rec in enumerate(list(self.tb.recordings[since:]), since)]
+
+    def _tagged_recording(self, i: int, rec: dict[str, Any]) -> dict[str, Any]:
+        """The station's entry `i` with its run and matrix values, as the report lists it."""
+        tags = self._tags.get(i, {"run": 0, "variables": {}})
+        return {**rec, "run": tags["run"], "variables": dict(tags["variables"])}
 
     def _do(self, step: Step) -> None:
         """Do one step with its action's handler (the GUI's runner wraps this)."""

@@ -215,10 +215,10 @@ def _cmd_run(args) -> int:
 
 
 def _run(args) -> int:
-    from ..campaign import CampaignReport, CampaignRunner, load_campaign
+    from ..campaign import CampaignReport, load_campaign
     from ..campaign.run_setup import resolve_setup
+    from ..campaign.scoring_behind import ScoringBehind
     from ..core.dictionary import load_dictionary
-    from ..core.stop_request import InterruptMemory
 
     given = {k: getattr(args, k) for k in ("device", "fast", "fast_sim", "seed", "testbed", "log_folder")
              if getattr(args, k) is not None}
@@ -249,13 +249,29 @@ def _run(args) -> int:
     setup = {**setup, "testbed": str(Path(setup["testbed"]).resolve()) if setup["testbed"] else None,
              "log_folder": str(folder)}
     t0 = time.monotonic()
+    scoring = None if args.no_analysis else ScoringBehind(c)
+    try:
+        return _run_and_score(args, c, setup, folder, report_path, resume, scoring, t0)
+    finally:
+        if scoring is not None:
+            scoring.close()
+
+
+def _run_and_score(args, c, setup: dict, folder: Path, report_path: Path, resume, scoring,
+                   t0: float) -> int:
+    """The campaign run, its report saved and its logs scored (each log behind the runs,
+    by `scoring`, as its recording ends); the exit status."""
+    from ..campaign import CampaignRunner
+    from ..core.stop_request import InterruptMemory
+
     report = None
     interrupted = False
     try:
         tb = _campaign_testbed(args, c, setup, folder)
         with InterruptMemory() as ctrl_c, tb:
             runner = CampaignRunner(c, tb, max_step_seconds=args.max_step_seconds,
-                                    progress=_Progress(len(c.steps), ctrl_c.requested))
+                                    progress=_Progress(len(c.steps), ctrl_c.requested),
+                                    on_recording=scoring.submit if scoring is not None else None)
             report = runner.run(resume)
     except KeyboardInterrupt:
         # outside a step (connecting, closing): the Testbed's exit has made the rig safe
@@ -279,7 +295,7 @@ def _run(args) -> int:
         print(f"metrics not computed after the interrupt: groundstation campaign report "
               f"{shlex.quote(str(report_path))}")
     elif not args.no_analysis and report.recordings:
-        _write_metrics(report, report_path, c)
+        _write_metrics(report, report_path, c, scored=scoring)
     if report.status == "interrupted":
         return EXIT_INTERRUPTED
     return EXIT_OK if report.status == "completed" else EXIT_FAILED
@@ -335,14 +351,14 @@ def _campaign_testbed(args, c, setup: dict, folder: Path):
 
 
 def _write_metrics(report, report_path: Path, campaign, *, html_only: bool = False,
-                   folder: Path | None = None):
-    """Score the report's logs and write the outputs beside it; the metrics, or None
-    when they could not be written (said why)."""
+                   folder: Path | None = None, scored=None):
+    """Score the report's logs (those `scored` has not scored behind the runs) and write
+    the outputs beside it; the metrics, or None when they could not be written (said why)."""
     from ..campaign.metrics import campaign_metrics, write_metrics
 
     t0 = time.monotonic()
     try:
-        metrics = campaign_metrics(report, campaign, folder=folder)
+        metrics = campaign_metrics(report, campaign, folder=folder, scored=scored)
         written = write_metrics(metrics, report, report_path, html_only=html_only)
     except (GroundStationError, OSError, ImportError) as exc:
         print(f"error: the metrics could not be written: {exc}", file=sys.stderr)

@@ -35,6 +35,7 @@ from pathlib import Path
 from PySide6.QtCore import QObject, Signal
 
 from ...campaign import ACTIONS, Campaign, CampaignReport, CampaignRunner, Step, StepResult
+from ...campaign.scoring_behind import ScoringBehind
 from ...core.contracts import BaseMotionInstrument
 from ...station.clock import ScriptAborted
 from ...core.errors import GroundStationError
@@ -185,6 +186,14 @@ class CampaignController(QObject):
 
     def _work(self, campaign: Campaign, folder: Path, cap: float | None,
               generator: str | BaseMotionInstrument | None) -> None:
+        scoring = ScoringBehind(campaign)      # each log scored while the next run records
+        try:
+            self._run_and_report(campaign, folder, cap, generator, scoring)
+        finally:
+            scoring.close()
+
+    def _run_and_report(self, campaign: Campaign, folder: Path, cap: float | None,
+                        generator: str | BaseMotionInstrument | None, scoring: ScoringBehind) -> None:
         session = self.session
         report: CampaignReport | None = None
         tb: Testbed | None = None
@@ -196,7 +205,8 @@ class CampaignController(QObject):
             if self.abort_requested:          # Esc while the generator was being opened
                 tb.abort_event.set()
             runner = _SignallingRunner(campaign, tb, self, max_step_seconds=cap,
-                                       progress=lambda step, f: self.sig_progress.emit(step.index, f))
+                                       progress=lambda step, f: self.sig_progress.emit(step.index, f),
+                                       on_recording=scoring.submit)
             report = runner.run()
         except GroundStationError as exc:
             self.sig_failed.emit(f"the campaign could not start: {exc}")
@@ -234,7 +244,7 @@ class CampaignController(QObject):
             self._echo(f"the report could not be saved to {path}: {exc}")
             path = None
         if path is not None and report.recordings:
-            self._write_metrics(report, path, campaign)
+            self._write_metrics(report, path, campaign, scoring)
         outcome = CampaignOutcome(report, path, folder, self.abort_requested)
         self.last = outcome
         if session.generator.is_open:          # the panel shows what the instrument holds now
@@ -242,12 +252,14 @@ class CampaignController(QObject):
             session.generator.refresh(state.channel if state is not None else 1)
         self.sig_finished.emit(outcome)
 
-    def _write_metrics(self, report: CampaignReport, path: Path, campaign: Campaign) -> None:
+    def _write_metrics(self, report: CampaignReport, path: Path, campaign: Campaign,
+                       scoring: ScoringBehind) -> None:
         """The logs scored and compared, written beside the report as `campaign run`
-        writes them (metrics CSV/JSON, charts, HTML); on this worker thread."""
+        writes them (metrics CSV/JSON, charts, HTML); on this worker thread.  Each log
+        was scored behind the runs as its recording ended (`scoring`)."""
         from ...campaign.metrics import campaign_metrics, write_metrics
         try:
-            written = write_metrics(campaign_metrics(report, campaign), report, path)
+            written = write_metrics(campaign_metrics(report, campaign, scored=scoring), report, path)
         except Exception as exc:              # the campaign's result stands without them
             log.exception("campaign metrics")
             self._echo(f"the metrics could not be written: {type(exc).__name__}: {exc}")

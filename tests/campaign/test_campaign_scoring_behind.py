@@ -1,0 +1,163 @@
+"""Each log scored while the next run records (campaign/scoring_behind.py): a real
+campaign on the fast simulator whose recordings are handed to ScoringBehind as they end.
+The rows it scored are the ones scoring every log again at the end gives, its run
+statuses filled in at the end; what it did not score (a log not handed over, a file
+moved) is scored at the end; a closed one scores nothing and never raises."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from groundstation import Testbed
+from groundstation.campaign import CampaignRunner, load_campaign
+from groundstation.campaign.metrics import campaign_metrics
+from groundstation.campaign.scoring_behind import ScoringBehind
+
+ROOT = Path(__file__).resolve().parents[2]
+RELATIVE = ROOT / "profiles" / "testbeds" / "relative_2dof.toml"
+DESIGN1 = ROOT / "profiles" / "controllers" / "relative_design1.toml"
+DESIGN2 = ROOT / "profiles" / "controllers" / "relative_design2.toml"
+
+CAMPAIGN = f'''
+[campaign]
+name = "behind_check"
+testbed = "{RELATIVE}"
+
+[matrix]
+design = ["{DESIGN1}", "{DESIGN2}"]
+ref = [0.0001, 0.0002]
+
+[analysis]
+start_after_mark = "step {{ref}} on"
+duration_s = 0.5
+sensor = "encoder_inner"
+integration_period_s = 0.1
+group_by = "ref"
+compare = "design"
+baseline = "relative_design1"
+
+[[setup]]
+action = "connect"
+
+[[run]]
+action = "start_recording"
+name = "{{campaign}}_{{design_stem}}_{{run}}"
+
+[[run]]
+action = "upload_design"
+design = "{{design}}"
+
+[[run]]
+action = "set_mode"
+mode = "RELATIVE"
+
+[[run]]
+action = "arm"
+
+[[run]]
+action = "mark"
+text = "step {{ref}} on"
+
+[[run]]
+action = "set_reference"
+angle_rad = "{{ref}}"
+
+[[run]]
+action = "dwell"
+seconds = 0.6
+
+[[run]]
+action = "disarm"
+
+[[run]]
+action = "stop_recording"
+'''
+
+
+@pytest.fixture(scope="module")
+def behind_run(tmp_path_factory):
+    """The campaign run once with its recordings handed to a ScoringBehind as they
+    ended: (campaign, report, the ScoringBehind, what it was handed)."""
+    base = tmp_path_factory.mktemp("behind")
+    path = base / "behind_check.toml"
+    path.write_text(CAMPAIGN)
+    c = load_campaign(path)
+    behind = ScoringBehind(c)
+    handed: list[dict] = []
+
+    def hand_over(recording: dict) -> None:
+        handed.append(recording)
+        behind.submit(recording)
+
+    with Testbed("sim", testbed=c.testbed, fast=True, log_folder=base / "logs",
+                 history=base / "history") as tb:
+        report = CampaignRunner(c, tb, on_recording=hand_over).run()
+    assert report.status == "completed", report.reason
+    yield c, report, behind, handed
+    behind.close()
+
+
+def _comparable(rows: list[dict]) -> str:
+    return json.dumps(rows, sort_keys=True, default=str)
+
+
+def test_each_recording_is_handed_over_as_the_report_lists_it(behind_run):
+    c, report, _, handed = behind_run
+    assert len(handed) == 4
+    assert handed == report.recordings
+    assert [(r["run"], r["variables"]["ref"]) for r in handed] == \
+        [(1, 0.0001), (2, 0.0002), (3, 0.0001), (4, 0.0002)]
+
+
+def test_rows_scored_behind_are_the_rows_scored_at_the_end(behind_run):
+    c, report, behind, _ = behind_run
+    taken_before = behind.taken
+    ahead = campaign_metrics(report, c, scored=behind)
+    assert behind.taken - taken_before == 4          # every log came from the thread
+    again = campaign_metrics(report, c)
+    assert _comparable(ahead.rows) == _comparable(again.rows)
+    assert ahead.comparison == again.comparison
+    assert all(r["run_status"] == "completed" for r in ahead.rows)
+    assert all(not r["error"] for r in ahead.rows)
+    # each row is handed back once: a second pass scores them itself
+    campaign_metrics(report, c, scored=behind)
+    assert behind.taken - taken_before == 4
+
+
+def test_a_log_not_handed_over_is_scored_at_the_end(behind_run, tmp_path):
+    c, report, _, _ = behind_run
+    fresh = ScoringBehind(c)
+    try:
+        fresh.submit(report.recordings[0])
+        metrics = campaign_metrics(report, c, scored=fresh)
+    finally:
+        fresh.close()
+    assert fresh.taken == 1
+    assert _comparable(metrics.rows) == _comparable(campaign_metrics(report, c).rows)
+
+
+def test_a_missing_log_is_a_row_with_its_error_either_way(behind_run, tmp_path):
+    c, report, _, _ = behind_run
+    gone = dict(report.recordings[0], files=[str(tmp_path / "no_such_log.h5")])
+    fresh = ScoringBehind(c)
+    try:
+        fresh.submit(gone)
+        row = fresh.take(gone["files"][0], gone["run"], gone["variables"], gone["name"], None)
+    finally:
+        fresh.close()
+    assert row is not None and row[0]["error"]
+    assert "no_such_log.h5" in row[0]["file"]
+
+
+def test_a_closed_one_takes_nothing_and_never_raises(behind_run):
+    c, report, _, _ = behind_run
+    closed = ScoringBehind(c)
+    closed.close()
+    closed.submit(report.recordings[0])              # no error, nothing queued
+    rec = report.recordings[0]
+    assert closed.take(rec["files"][0], rec["run"], rec["variables"], rec["name"], None) is None
+    closed.close()                                   # twice: fine
+    assert closed.taken == 0
