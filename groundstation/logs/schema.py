@@ -40,13 +40,17 @@ SCHEMA_VERSION = 1
 # (measured: 8192 rows made live files 6.5x larger than batch-written ones; 256 none)
 CHUNK_ROWS = 256
 # rows per chunk in a fast campaign's logs (the simulator in this process, many device
-# seconds a wall second): a flush then carries thousands of frames, and what costs the
-# writer is the number of chunks, not their size - every chunk is one pass through
-# HDF5's chunk allocation and index and one zlib set-up (deflateInit clears 64 KiB of
-# hash table however small the chunk).  1024 rows: 4x fewer chunks, about a quarter
-# less writer CPU (docs/campaigns.md, "Speed"); a chunk rewritten at a flush is still
-# a small part of the thousands of rows written
-FAST_CHUNK_ROWS = 1024
+# seconds a wall second): a flush then carries thousands of frames, and what costs is
+# the number of chunks, not their size - each one is a pass through HDF5's chunk
+# allocation and index in the writer, and a shuffle, a deflate set-up and a
+# write_direct_chunk call when the log is compressed behind the session.  The writer
+# writes these logs uncompressed, so a chunk a flush fills only in part is completed in
+# place by the next one (no dead space, unlike the compressed chunks above).  8192 rows:
+# 64 KiB a chunk of a float64 column, and the raw frames' chunks stay capped near
+# 512 KiB (h5file._appendable), so every chunk fits HDF5's default 1 MiB chunk cache and
+# a reader paging through a window inflates each chunk once.  Against 1024 rows: the compression behind a fast inertial_bm 20 % less
+# CPU, the writers 13 % less, the logs 4 % smaller (docs/campaigns.md, "Sixth round")
+FAST_CHUNK_ROWS = 8192
 # the log writer's niceness in a fast campaign: on a contended machine the simulator
 # (which the writer waits for anyway) gets the core first
 FAST_WRITER_NICENESS = 10

@@ -84,9 +84,13 @@ def _chunks(path: Path) -> dict[str, tuple]:
 
 
 @pytest.mark.parametrize("flush_frames", [300, 0])
-def test_chunking_changes_nothing_a_reader_sees(dictionary, blocks, tmp_path, flush_frames):
+@pytest.mark.parametrize("chunk_rows", [1024, schema.FAST_CHUNK_ROWS])
+def test_chunking_changes_nothing_a_reader_sees(dictionary, blocks, tmp_path, flush_frames,
+                                                 chunk_rows):
+    """1024 rows: several whole chunks and a partial one; FAST_CHUNK_ROWS: one chunk,
+    filled in place by flush after flush."""
     live = _write(tmp_path / "live.h5", dictionary, blocks, None, 300)
-    fast = _write(tmp_path / "fast.h5", dictionary, blocks, schema.FAST_CHUNK_ROWS, flush_frames)
+    fast = _write(tmp_path / "fast.h5", dictionary, blocks, chunk_rows, flush_frames)
     a, b = _content(live), _content(fast)
     _assert_same(a, b)
     assert len(a["HIGH_RATE frames"]) == int(SECONDS * 1200)
@@ -96,9 +100,10 @@ def test_chunking_changes_nothing_a_reader_sees(dictionary, blocks, tmp_path, fl
         if name.startswith("journal/") or name.endswith(("/offset", "/length")):
             assert ca[name] == cb[name], name                  # the journal, byte streams: as before
     assert ca["telemetry/HIGH_RATE/tick"] == (schema.CHUNK_ROWS,)
-    assert cb["telemetry/HIGH_RATE/tick"] == (schema.FAST_CHUNK_ROWS,)
-    assert cb["telemetry/HIGH_RATE/raw/encoder_inner"] == (schema.FAST_CHUNK_ROWS,)
-    assert cb["frames/HIGH_RATE/data"] == (schema.FAST_CHUNK_ROWS, 78)
+    assert cb["telemetry/HIGH_RATE/tick"] == (chunk_rows,)
+    assert cb["telemetry/HIGH_RATE/raw/encoder_inner"] == (chunk_rows,)
+    # raw frames, the widest rows, are chunked at most about 512 KiB a chunk
+    assert cb["frames/HIGH_RATE/data"] == (min(chunk_rows, 512 * 1024 // 78), 78)
     assert cb["journal/time"] == ca["journal/time"] == (1024,)
 
 
