@@ -181,6 +181,9 @@ def main() -> None:
     ap.add_argument("--before", metavar="DIR", default=None,
                     help="--whole: also run each campaign from this checkout (a git worktree of "
                          "an earlier commit), interleaved, for a before/after in one run")
+    ap.add_argument("--before-python", metavar="PYTHON", default=None,
+                    help="--whole --before: run that checkout with this interpreter (another "
+                         "virtualenv: a dependency's version before and after as well)")
     ap.add_argument("--open-session", type=int, default=0, metavar="N",
                     help="--whole: also run each campaign N times from one open session "
                          "(campaign_open_session.py)")
@@ -190,7 +193,8 @@ def main() -> None:
         return open_sessions(args.whole, args.rounds, args.open_session)
     if args.whole:
         return whole_campaigns(args.whole, args.rounds, args.analysis,
-                               Path(args.before).resolve() if args.before else None)
+                               Path(args.before).resolve() if args.before else None,
+                               args.before_python)
     ways = {"ours": (FastPacing(), "held", "process"), "inline": (FastPacing(), "held", "inline"),
             "one chunk": (ONE_CHUNK_IN_FLIGHT, "realtime", "inline")}
     runs: dict[str, list[dict]] = {k: [] for k in ways}
@@ -239,7 +243,8 @@ def main() -> None:
     print(f"written to {save('campaign', res)}")
 
 
-def whole_campaigns(names: list[str], rounds: int, analysis: bool, before: Path | None) -> None:
+def whole_campaigns(names: list[str], rounds: int, analysis: bool, before: Path | None,
+                    before_python: str | None = None) -> None:
     """Each campaign `rounds` times (and from `before` too), interleaved, the simulator
     alone measured before each round; the round with the median wall time is printed in
     full."""
@@ -252,7 +257,7 @@ def whole_campaigns(names: list[str], rounds: int, analysis: bool, before: Path 
         rate, _ = simulator_alone(60.0)
         limits.append(rate)
         for p, (label, tree) in ((p, t) for p in paths for t in trees):
-            x = whole(p, analysis=analysis, tree=tree)
+            x = whole(p, analysis=analysis, tree=tree, python=before_python if tree else None)
             x["simulator_alone_x"] = rate
             x["ratio_to_limit"] = x["device_per_wall"] / rate
             results[f"{p.stem} {label}"].append(x)

@@ -132,15 +132,17 @@ def _device_seconds(folder: Path) -> tuple[float, int]:
     return frames / 1200.0, logs
 
 
-def whole(campaign: Path, *, analysis: bool, tree: Path | None = None) -> dict:
+def whole(campaign: Path, *, analysis: bool, tree: Path | None = None,
+          python: str | None = None) -> dict:
     """One whole campaign, split as the module says.  `tree`: run the package of another
-    checkout (a `git worktree` of an earlier commit: before and after in one run)."""
+    checkout (a `git worktree` of an earlier commit: before and after in one run);
+    `python`: with that interpreter (another virtualenv), else this one."""
     env = dict(os.environ)
     if tree is not None:
         env["PYTHONPATH"] = str(tree)
         campaign = tree / campaign.relative_to(ROOT)
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, str(_console_script(tree or ROOT, Path(tmp))), "campaign", "run",
+        cmd = [python or sys.executable, str(_console_script(tree or ROOT, Path(tmp))), "campaign", "run",
                str(campaign), "--device", "sim", "--fast"] + ([] if analysis else ["--no-analysis"])
         t_launch = time.time()
         w0 = time.perf_counter()
