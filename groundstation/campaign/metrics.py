@@ -200,8 +200,9 @@ def campaign_metrics(report: CampaignReport, campaign: Campaign | None = None, *
         for part, f in enumerate(files, 1):
             if folder is not None and not Path(f).exists() and (Path(folder) / Path(f).name).exists():
                 f = str(Path(folder) / Path(f).name)
-            name, numbered, status = str(rec.get("name", "")), part if len(files) > 1 else None, \
-                run_status(report, run)
+            name = str(rec.get("name", ""))
+            numbered = part if len(files) > 1 else None
+            status = run_status(report, run)
             ahead = scored.take(f, run, variables, name, numbered) if scored is not None else None
             if ahead is not None:
                 row, data[len(rows)] = ahead

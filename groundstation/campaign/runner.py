@@ -5,8 +5,9 @@ with the rig made safe, or - with on_run_failure = "next_run" - ends only that r
 Every recording the report lists carries the run it ended in ("run": 1, 2, ...; 0 in
 setup or teardown) and that run's matrix values ("variables": each matrix key and, for
 a text value, its KEY_stem), so that the logs' metrics can be grouped by them
-(campaign/metrics.py) - recordings closed by a failure or Ctrl-C as well.  `on_recording` is handed each one, so
-tagged, as soon as it ends (scoring_behind.py scores its logs while the next run records)."""
+(campaign/metrics.py) - recordings closed by a failure or Ctrl-C as well.  `on_recording`
+is handed each one, so tagged, as soon as it ends (scoring_behind.py scores its logs
+while the next run records)."""
 
 from __future__ import annotations
 

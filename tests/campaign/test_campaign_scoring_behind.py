@@ -1,13 +1,13 @@
 """Each log scored while the next run records (campaign/scoring_behind.py): a real
 campaign on the fast simulator whose recordings are handed to ScoringBehind as they end.
 The rows it scored are the ones scoring every log again at the end gives, its run
-statuses filled in at the end; what it did not score (a log not handed over, a file
-moved) is scored at the end; a closed one scores nothing and never raises."""
+statuses filled in at the end; what it did not score (a log not handed over) is scored
+at the end; a missing log is a row with its error; a closed one scores nothing and
+never raises."""
 
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import pytest
 
@@ -16,65 +16,8 @@ from groundstation.campaign import CampaignRunner, load_campaign
 from groundstation.campaign.metrics import campaign_metrics
 from groundstation.campaign.scoring_behind import ScoringBehind
 
-ROOT = Path(__file__).resolve().parents[2]
-RELATIVE = ROOT / "profiles" / "testbeds" / "relative_2dof.toml"
-DESIGN1 = ROOT / "profiles" / "controllers" / "relative_design1.toml"
-DESIGN2 = ROOT / "profiles" / "controllers" / "relative_design2.toml"
-
-CAMPAIGN = f'''
-[campaign]
-name = "behind_check"
-testbed = "{RELATIVE}"
-
-[matrix]
-design = ["{DESIGN1}", "{DESIGN2}"]
-ref = [0.0001, 0.0002]
-
-[analysis]
-start_after_mark = "step {{ref}} on"
-duration_s = 0.5
-sensor = "encoder_inner"
-integration_period_s = 0.1
-group_by = "ref"
-compare = "design"
-baseline = "relative_design1"
-
-[[setup]]
-action = "connect"
-
-[[run]]
-action = "start_recording"
-name = "{{campaign}}_{{design_stem}}_{{run}}"
-
-[[run]]
-action = "upload_design"
-design = "{{design}}"
-
-[[run]]
-action = "set_mode"
-mode = "RELATIVE"
-
-[[run]]
-action = "arm"
-
-[[run]]
-action = "mark"
-text = "step {{ref}} on"
-
-[[run]]
-action = "set_reference"
-angle_rad = "{{ref}}"
-
-[[run]]
-action = "dwell"
-seconds = 0.6
-
-[[run]]
-action = "disarm"
-
-[[run]]
-action = "stop_recording"
-'''
+# the metrics tests' 2 x 2 campaign: relative Design #1 and #2, each after two step sizes
+from test_campaign_metrics import CAMPAIGN, RUNS
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +25,7 @@ def behind_run(tmp_path_factory):
     """The campaign run once with its recordings handed to a ScoringBehind as they
     ended: (campaign, report, the ScoringBehind, what it was handed)."""
     base = tmp_path_factory.mktemp("behind")
-    path = base / "behind_check.toml"
+    path = base / "metrics_check.toml"
     path.write_text(CAMPAIGN)
     c = load_campaign(path)
     behind = ScoringBehind(c)
@@ -108,8 +51,8 @@ def test_each_recording_is_handed_over_as_the_report_lists_it(behind_run):
     c, report, _, handed = behind_run
     assert len(handed) == 4
     assert handed == report.recordings
-    assert [(r["run"], r["variables"]["ref"]) for r in handed] == \
-        [(1, 0.0001), (2, 0.0002), (3, 0.0001), (4, 0.0002)]
+    assert [(r["run"], r["variables"]["design_stem"], r["variables"]["ref"]) for r in handed] == \
+        [(run, *RUNS[run]) for run in sorted(RUNS)]
 
 
 def test_rows_scored_behind_are_the_rows_scored_at_the_end(behind_run):
