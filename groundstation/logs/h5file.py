@@ -39,7 +39,7 @@ def _appendable(group: h5py.Group, name: str, dtype, row_shape: tuple = (), chun
     chunk_rows = chunk_rows or schema.CHUNK_ROWS
     row_bytes = int(np.prod(row_shape, dtype=np.int64)) * np.dtype(dtype).itemsize if row_shape else np.dtype(dtype).itemsize
     if row_shape:   # keep chunks near 0.5 MB for wide rows (raw frames)
-        chunk_rows = max(64, min(chunk_rows, (512 * 1024) // max(1, row_bytes)))
+        chunk_rows = max(64, min(chunk_rows, schema.WIDE_ROW_CHUNK_BYTES // max(1, row_bytes)))
     return group.create_dataset(name, shape=(0, *row_shape), maxshape=(None, *row_shape),
                                 dtype=dtype, chunks=(chunk_rows, *row_shape),
                                 **(schema.COMPRESSION if compression is None else compression))

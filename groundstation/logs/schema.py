@@ -46,11 +46,15 @@ CHUNK_ROWS = 256
 # write_direct_chunk call when the log is compressed behind the session.  The writer
 # writes these logs uncompressed, so a chunk a flush fills only in part is completed in
 # place by the next one (no dead space, unlike the compressed chunks above).  8192 rows:
-# 64 KiB a chunk of a float64 column, and the raw frames' chunks stay capped near
-# 512 KiB (h5file._appendable), so every chunk fits HDF5's default 1 MiB chunk cache and
-# a reader paging through a window inflates each chunk once.  Against 1024 rows: the compression behind a fast inertial_bm 20 % less
-# CPU, the writers 13 % less, the logs 4 % smaller (docs/campaigns.md, "Sixth round")
+# 64 KiB a chunk of a float64 column, and the raw frames' chunks stay capped at
+# WIDE_ROW_CHUNK_BYTES, so every chunk fits HDF5's default 1 MiB chunk cache and a reader
+# paging through a window inflates each chunk once.  Against 1024 rows: the compression
+# behind a fast inertial_bm 20 % less CPU, the writers 13 % less, the logs 4 % smaller
+# (docs/campaigns.md, "Sixth round")
 FAST_CHUNK_ROWS = 8192
+#: at most this many bytes a chunk for wide rows (raw frames, 63-78 bytes a row): fewer
+#: rows a chunk than the per-frame columns have
+WIDE_ROW_CHUNK_BYTES = 512 * 1024
 # the log writer's niceness in a fast campaign: on a contended machine the simulator
 # (which the writer waits for anyway) gets the core first
 FAST_WRITER_NICENESS = 10

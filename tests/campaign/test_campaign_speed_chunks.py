@@ -31,8 +31,9 @@ def test_fast_session_records_with_fast_chunks(tmp_path):
     with h5py.File(path, "r") as f:
         assert f["telemetry/HIGH_RATE/tick"].chunks == (schema.FAST_CHUNK_ROWS,)
         assert f["telemetry/HOUSEKEEPING/tick"].chunks == (schema.FAST_CHUNK_ROWS,)
-        # raw frames, the widest rows, are chunked at most about 512 KiB a chunk
-        assert f["frames/HIGH_RATE/data"].chunks[0] == min(schema.FAST_CHUNK_ROWS, 512 * 1024 // 78)
+        # raw frames, the widest rows (78 bytes), are chunked at most WIDE_ROW_CHUNK_BYTES a chunk
+        assert f["frames/HIGH_RATE/data"].chunks[0] == min(schema.FAST_CHUNK_ROWS,
+                                                           schema.WIDE_ROW_CHUNK_BYTES // 78)
         assert f["journal/time"].chunks == (1024,)
     with LogReader(path) as log:
         ticks = log.read("HIGH_RATE", "tick")["tick"]

@@ -102,8 +102,8 @@ def test_chunking_changes_nothing_a_reader_sees(dictionary, blocks, tmp_path, fl
     assert ca["telemetry/HIGH_RATE/tick"] == (schema.CHUNK_ROWS,)
     assert cb["telemetry/HIGH_RATE/tick"] == (chunk_rows,)
     assert cb["telemetry/HIGH_RATE/raw/encoder_inner"] == (chunk_rows,)
-    # raw frames, the widest rows, are chunked at most about 512 KiB a chunk
-    assert cb["frames/HIGH_RATE/data"] == (min(chunk_rows, 512 * 1024 // 78), 78)
+    # raw frames, the widest rows (78 bytes), are chunked at most WIDE_ROW_CHUNK_BYTES a chunk
+    assert cb["frames/HIGH_RATE/data"] == (min(chunk_rows, schema.WIDE_ROW_CHUNK_BYTES // 78), 78)
     assert cb["journal/time"] == ca["journal/time"] == (1024,)
 
 
