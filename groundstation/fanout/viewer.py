@@ -55,6 +55,10 @@ BAD_IN_A_ROW = 20
 #: stalled (the publisher drops them at its high-water mark), never that many; a larger
 #: jump (or one backwards: a restarted publisher) is a resynchronisation.
 MAX_SEQUENCE_GAP = 1_000_000
+#: how long an ABORT asked before the publisher's first hello waits for it: four of the
+#: publisher's hello periods (publisher.HELLO_PERIOD_S, 0.5 s).  After that the console
+#: says to press Abort on the commanding station
+ABORT_WAITS_FOR_HELLO_S = 2.0
 #: messages handled before the reader looks at its clock again, so that a flood of
 #: messages cannot keep the watchdog from running
 DRAIN_BATCH = 1000
@@ -139,6 +143,12 @@ class WatchClient(TelemetryOutlet):
         raise ReadOnlyConsole(f"{name}: {read_only_message(self.endpoint)}")
 
     def abort(self) -> CommandResult:
+        """ABORT straight to the device.  Asked before the publisher's first hello has
+        arrived - it says where the device is, twice a second, and a console that has
+        just started watching can already show the rig's telemetry - it waits for that
+        hello (at most ABORT_WAITS_FOR_HELLO_S) instead of failing at once."""
+        if not self.hello and self._thread is not None and not self.ended:
+            self._wake.wait(ABORT_WAITS_FOR_HELLO_S)
         return send_abort(self.dictionary, self.device, self.endpoint,
                           on_result=self._notify_command)
 

@@ -215,3 +215,26 @@ def test_a_watch_client_is_a_telemetry_source(dictionary):
         assert (list(inspect.signature(getattr(WatchClient, name)).parameters)
                 == list(inspect.signature(getattr(DeviceClient, name)).parameters)), name
     viewer.close()
+
+
+def test_an_abort_asked_before_the_first_hello_waits_for_it(dictionary):
+    """A console that has just started watching can show telemetry before the
+    publisher's first hello (which says where the device is) has come: an ABORT asked
+    then waits for the hello instead of failing with "no hello"."""
+    dev = SimulatedDevice(dictionary, pacing="manual", seed=3).start()
+    client = open_client(dictionary, f"tcp://127.0.0.1:{dev.tcp_port}?telemetry=stream",
+                         heartbeat=False)
+    pub = Publisher("tcp://127.0.0.1:*", hello_period_s=0.2)
+    viewer = WatchClient(dictionary, pub.endpoint)
+    try:
+        client.connect()
+        pub.attach(client, f"tcp://127.0.0.1:{dev.tcp_port}?telemetry=stream")
+        viewer.start()
+        assert not viewer.hello                    # nothing heard yet
+        assert viewer.abort().final_stage == "COMPLETED"
+        assert viewer.hello["device"]["port"] == dev.tcp_port
+    finally:
+        viewer.close()
+        pub.close()
+        client.close()
+        dev.stop()
