@@ -42,6 +42,7 @@ from ..link.stats import LinkStatistics
 from . import schema, wire
 from .abort import send_abort
 from .handshake import HandshakeWatch
+from .publisher import HELLO_PERIOD_S
 from .endpoints import FanoutError, ReadOnlyConsole, parse_endpoint, read_only_message
 
 log = logging.getLogger(__name__)
@@ -56,9 +57,9 @@ BAD_IN_A_ROW = 20
 #: jump (or one backwards: a restarted publisher) is a resynchronisation.
 MAX_SEQUENCE_GAP = 1_000_000
 #: how long an ABORT asked before the publisher's first hello waits for it: four of the
-#: publisher's hello periods (publisher.HELLO_PERIOD_S, 0.5 s).  After that the console
-#: says to press Abort on the commanding station
-ABORT_WAITS_FOR_HELLO_S = 2.0
+#: publisher's hello periods (2 s).  After that the console says to press Abort on the
+#: commanding station
+ABORT_WAITS_FOR_HELLO_S = 4 * HELLO_PERIOD_S
 #: messages handled before the reader looks at its clock again, so that a flood of
 #: messages cannot keep the watchdog from running
 DRAIN_BATCH = 1000
