@@ -2,10 +2,18 @@
 
 from __future__ import annotations
 
+import atexit
 import os
+import shutil
+import tempfile
 import time
 
 os.environ.setdefault("QT_QPA_PLATFORM", "offscreen")
+# the numerics cache (core/numerics_cache.py) is this run's own, inherited by every
+# process a test starts: the tests neither read a user's cache nor leave files in it
+_NUMERICS_CACHE = tempfile.mkdtemp(prefix="gs-test-numerics-")
+os.environ["GROUNDSTATION_CACHE_DIR"] = _NUMERICS_CACHE
+atexit.register(shutil.rmtree, _NUMERICS_CACHE, True)
 
 import numpy as np
 import pytest

@@ -80,3 +80,17 @@ def test_a_session_with_the_simulator_in_a_child_imports_no_engine():
 def test_the_simulators_names_still_come_from_the_package():
     loaded = _loaded_after("from groundstation.sim import SimulatedDevice, Firmware")
     assert {"groundstation.sim.device", "groundstation.sim.firmware", "numba"} <= loaded
+
+
+def test_checking_a_campaign_imports_neither_scipy_signal_nor_scipy_linalg():
+    """`campaign show` and the check before `campaign run`: a design is read and its
+    factors checked, discretised only when uploaded; a base motion's held stage comes
+    from the numerics cache once computed (the first check of inertial_bm fills it)."""
+    _loaded_after("from groundstation.campaign import load_campaign\n"
+                  "load_campaign('profiles/campaigns/inertial_bm.toml')")
+    loaded = _loaded_after("from groundstation.campaign import load_campaign\n"
+                           "load_campaign('profiles/campaigns/relative_steps.toml')\n"
+                           "load_campaign('profiles/campaigns/inertial_bm.toml')")
+    assert {"groundstation.params.design_file", "groundstation.basemotion.synthesis"} <= loaded
+    for heavy in ("scipy.signal", "scipy.linalg"):
+        assert heavy not in loaded, heavy

@@ -10,18 +10,31 @@
     print(check.summary()); curves = csp_curves(check)       # arrays for a CSP plot
 
 No I/O beyond reading the PSD file, no plotting, no Qt.
+
+The names below are imported on first use (PEP 562): a campaign's check reads a base
+motion's PSD and synthesises its profile, which needs numpy only, while the checks of a
+recorded motion (verify.py) need scipy.signal and the analysis - 0.3 s of imports the
+check would otherwise pay (docs/campaigns.md, "Seventh round").
 """
 
-from .psd import BaseMotionError, PsdFileError, PsdTable, load_psd, parse_psd
-from .stage import BaseStageModel
-from .synthesis import (DEFAULT_DURATION_S, DEFAULT_POINTS, BaseMotionProfile, load_profile,
-                        make_profile, synthesise_angle)
-from .verify import (BandRms, BaseMotionCheck, CspCurves, PreviewSpectrum, RecordWindow,
-                     band_rms, check_base_motion, check_record, csp_curves, csp_from_psd,
-                     preview_spectrum, select_window)
+from __future__ import annotations
 
-__all__ = ["BandRms", "BaseMotionCheck", "BaseMotionError", "BaseMotionProfile", "BaseStageModel",
-           "CspCurves", "DEFAULT_DURATION_S", "DEFAULT_POINTS", "PreviewSpectrum", "PsdFileError",
-           "PsdTable", "RecordWindow", "band_rms", "check_base_motion", "check_record", "csp_curves",
-           "csp_from_psd", "load_profile", "load_psd", "make_profile", "parse_psd",
-           "preview_spectrum", "select_window", "synthesise_angle"]
+from ..core.lazy_names import lazy_dir, lazy_getattr
+
+_LAZY = {
+    "BaseMotionError": "psd", "PsdFileError": "psd", "PsdTable": "psd", "load_psd": "psd",
+    "parse_psd": "psd",
+    "BaseStageModel": "stage",
+    "DEFAULT_DURATION_S": "synthesis", "DEFAULT_POINTS": "synthesis",
+    "BaseMotionProfile": "synthesis", "load_profile": "synthesis", "make_profile": "synthesis",
+    "synthesise_angle": "synthesis",
+    "BandRms": "verify", "BaseMotionCheck": "verify", "CspCurves": "verify",
+    "PreviewSpectrum": "verify", "RecordWindow": "verify", "band_rms": "verify",
+    "check_base_motion": "verify", "check_record": "verify", "csp_curves": "verify",
+    "csp_from_psd": "verify", "preview_spectrum": "verify", "select_window": "verify",
+}
+
+__getattr__ = lazy_getattr(__name__, _LAZY, globals())
+__dir__ = lazy_dir(_LAZY, globals())
+
+__all__ = sorted(_LAZY)

@@ -20,8 +20,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import signal
 
+from ..core.numerics_cache import cached_arrays, scipy_version
 from .psd import BaseMotionError
 
 
@@ -73,7 +73,27 @@ class BaseStageModel:
         """Response (rad/V) from a staircase input (samples held for `sample_interval_s`)
         to the output at the sample instants: the zero-order-hold equivalent."""
         num, den = self._continuous()
-        numd, dend, _ = signal.cont2discrete((num, den), sample_interval_s, method="zoh")
+        numd, dend = _held(num, den, float(sample_interval_s))
         z = np.exp(2j * np.pi * np.asarray(frequency_hz, dtype=float) * sample_interval_s)
         b = np.ravel(numd)
         return np.polyval(b, z) / np.polyval(dend, z)
+
+
+def _held(num, den, sample_interval_s: float) -> tuple[np.ndarray, np.ndarray]:
+    """scipy.signal.cont2discrete's zero-order hold of num/den, kept on disk by its inputs
+    (core/numerics_cache.py): a campaign's check synthesises every base motion it plays,
+    and would otherwise import scipy.signal (0.3 s) for this one conversion."""
+
+    def compute():
+        from scipy import signal
+
+        numd, dend, _ = signal.cont2discrete((num, den), sample_interval_s, method="zoh")
+        return np.asarray(numd, dtype=float), np.asarray(dend, dtype=float)
+
+    def valid(arrays) -> bool:
+        return (len(arrays) == 2 and arrays[1].ndim == 1 and arrays[1].size == len(den)
+                and all(a.dtype == np.float64 and np.all(np.isfinite(a)) for a in arrays))
+
+    inputs = (np.asarray(num, dtype=float), np.asarray(den, dtype=float), sample_interval_s)
+    numd, dend = cached_arrays("held_stage", scipy_version(), inputs, compute, valid)
+    return numd, dend

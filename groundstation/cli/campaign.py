@@ -216,6 +216,7 @@ def _cmd_run(args) -> int:
 
 def _run(args) -> int:
     from ..campaign import CampaignReport, load_campaign
+    from ..campaign.designs_ahead import discretise_designs_ahead
     from ..campaign.run_setup import resolve_setup
     from ..campaign.scoring_behind import ScoringBehind
     from ..core.dictionary import load_dictionary
@@ -249,6 +250,8 @@ def _run(args) -> int:
     setup = {**setup, "testbed": str(Path(setup["testbed"]).resolve()) if setup["testbed"] else None,
              "log_folder": str(folder)}
     t0 = time.monotonic()
+    # while the simulator's child starts: a new design's imports paid here, not in a run
+    discretise_designs_ahead(c, dictionary)
     scoring = None if args.no_analysis else ScoringBehind(c)
     try:
         return _run_and_score(args, c, setup, folder, report_path, resume, scoring, t0)

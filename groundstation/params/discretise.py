@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Mapping
 
 import numpy as np
-from scipy import signal
 
+from ..core.numerics_cache import cached_arrays, scipy_version
 from .tf_algebra import CONTROL_RATE_HZ, DesignError, TransferFunction, _factor_text
 
 if TYPE_CHECKING:
@@ -103,10 +103,30 @@ def discretise(tf: TransferFunction, rate_hz: float = CONTROL_RATE_HZ,
     bad = singular_factors(tf, rate_hz, prewarp_hz)
     if bad:
         raise DesignError("; ".join(_singular_text(name, kind, r, rate_hz, prewarp_hz) for kind, r in bad))
-    zd, pd, kd = signal.bilinear_zpk(tf.zeros, tf.poles, tf.gain, bilinear_rate_hz(rate_hz, prewarp_hz))
     # s = 0 maps to (2fs + 0)/(2fs - 0) = 1 exactly, so an integrator stays on z = 1
-    sos = np.atleast_2d(signal.zpk2sos(zd, pd, kd))
+    sos = _bilinear_sections(tf.zeros, tf.poles, tf.gain, bilinear_rate_hz(rate_hz, prewarp_hz))
     return _share_gain(sos, rate_hz)
+
+
+def _bilinear_sections(zeros, poles, gain: float, map_rate_hz: float) -> np.ndarray:
+    """scipy.signal's bilinear map and section pairing (zpk2sos), kept on disk by their
+    inputs (core/numerics_cache.py): a check of designs read before imports no
+    scipy.signal."""
+
+    def compute():
+        from scipy import signal
+
+        zd, pd, kd = signal.bilinear_zpk(zeros, poles, gain, map_rate_hz)
+        return (np.atleast_2d(signal.zpk2sos(zd, pd, kd)),)
+
+    def valid(arrays) -> bool:
+        return (len(arrays) == 1 and arrays[0].dtype == np.float64 and arrays[0].ndim == 2
+                and arrays[0].shape[0] >= 1 and arrays[0].shape[1] == 6
+                and bool(np.all(np.isfinite(arrays[0]))))
+
+    inputs = (np.asarray(zeros, dtype=complex), np.asarray(poles, dtype=complex),
+              float(gain), float(map_rate_hz))
+    return cached_arrays("sections", scipy_version(), inputs, compute, valid)[0]
 
 
 def _share_gain(sos: np.ndarray, rate_hz: float) -> np.ndarray:

@@ -25,9 +25,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.linalg import expm
 
 from ..core.dictionary import default_control_rate_hz
+from ..core.numerics_cache import cached_arrays, scipy_version
 from .testbed import Testbed
 
 N_STATE = 8
@@ -94,10 +94,23 @@ def _discretised(a_shape, a_bytes, b_shape, b_bytes, h):
     A = np.frombuffer(a_bytes).reshape(a_shape)
     B = np.frombuffer(b_bytes).reshape(b_shape)
     n, m = B.shape
-    M = np.zeros((n + m, n + m))
-    M[:n, :n], M[:n, n:] = A, B
-    E = expm(M * h)
-    return E[:n, :n].copy(), E[:n, n:].copy()
+
+    def compute():
+        # scipy.linalg only here, and only for a plant not sampled before: the
+        # simulator's child and a campaign's first upload would otherwise import it
+        # (0.1 s) for one exponential (core/numerics_cache.py)
+        from scipy.linalg import expm
+
+        M = np.zeros((n + m, n + m))
+        M[:n, :n], M[:n, n:] = A, B
+        E = expm(M * h)
+        return E[:n, :n].copy(), E[:n, n:].copy()
+
+    def valid(arrays) -> bool:
+        return (len(arrays) == 2 and arrays[0].shape == (n, n) and arrays[1].shape == (n, m)
+                and all(a.dtype == np.float64 and np.all(np.isfinite(a)) for a in arrays))
+
+    return cached_arrays("zero_order_hold", scipy_version(), (A, B, float(h)), compute, valid)
 
 
 def discrete_model(tb: Testbed, control_rate_hz: float | None = None) -> DiscreteModel:

@@ -7,7 +7,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy import signal
 
 from .samples import RATE_HZ, Profile
 
@@ -21,6 +20,7 @@ def preview(profile: Profile, nperseg: int = 16384) -> tuple[np.ndarray, np.ndar
     t = np.arange(x.size) / profile.rate
     if x.size < 2:
         return t, x, np.zeros(1), np.zeros(1)
+    from scipy import signal      # here, not at the top: 0.3 s a campaign's check need not pay
     freqs, psd = signal.welch(x, fs=profile.rate, window="hann", nperseg=min(nperseg, x.size),
                               detrend=False, scaling="density")
     return t, x, freqs, psd

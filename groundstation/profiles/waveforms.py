@@ -24,8 +24,10 @@ import math
 from typing import Sequence
 
 import numpy as np
-from scipy import signal
 
+# scipy.signal is imported inside the generators that use it (sweep, band-limited
+# noise, PRBS): its import costs about 0.3 s, and a campaign's check builds every
+# profile it will play, most of them steps, ramps and sines that never need it.
 from ..core.dictionary import default_control_rate_hz
 from ..core.errors import GroundStationError
 
@@ -262,6 +264,7 @@ def swept_sine(duration_s: float, amplitude: float, f_start_hz: float, f_stop_hz
         raise GeneratorError(f"method must be one of {', '.join(SWEEP_METHODS)}, not {method!r}")
     t = np.arange(n) / rate
     t1 = (n - 1) / rate
+    from scipy import signal
     y = signal.chirp(t, f0, t1, f1, method=method, phi=-90.0)
     return amplitude * y * taper(n, int(round(ramp_s * rate)))
 
@@ -315,6 +318,7 @@ def band_limited_noise(duration_s: float, rms: float, f_low_hz: float, f_high_hz
     else:
         if int(order) != order or not 1 <= order <= 10:
             raise GeneratorError(f"order must be a whole number 1 … 10, not {order!r}")
+        from scipy import signal
         if f_low > 0:
             sos = signal.butter(int(order), [f_low, f_high], btype="bandpass", fs=rate, output="sos")
         else:
@@ -377,6 +381,7 @@ def prbs(amplitude: float, bits: int, *, samples_per_bit: int = 1, periods: int 
     state = rng.integers(0, 2, bits).astype(np.int8)
     if not state.any():
         state[0] = 1                          # the all-zero state never leaves zero
+    from scipy import signal
     seq, _ = signal.max_len_seq(bits, state=state, length=length)
     levels = np.where(seq > 0, a, -a)
     k = (np.arange(n) - ramp_n) // spb % length

@@ -1,0 +1,107 @@
+"""Results of a few pure numerical calls, kept on disk under a key made of their inputs.
+
+Why: two calls a session makes before anything moves need a heavy import for a few
+microseconds of arithmetic.  The controller's sections (scipy.signal's bilinear map and
+section pairing) cost an import of about 0.3 s of CPU - scipy.signal brings scipy.stats,
+scipy.interpolate and scipy.optimize along - and the plant's zero-order hold (a matrix
+exponential) costs scipy.linalg's, about 0.1 s, half of it numpy.f2py, which scipy's
+array-API layer imports.  A fast campaign pays both on the way to its first run: the
+command in its check, the simulator's child before it can say it is ready.  The
+results are a pure function of the inputs and of scipy's version, so they are kept
+under a key made of exactly those, bit for bit (numba keeps its compiled kernels the
+same way), and the import happens only when a key is new.
+
+The cache can only save time, never change a result or stop a command: a file that is
+missing, unreadable, damaged or not what its kind expects is computed again (and
+written again if the folder allows), and a folder that cannot be written is not used.
+A file is written whole or not at all (a temporary file renamed over it).  Where it
+lives: `GROUNDSTATION_CACHE_DIR` if set (the tests set it), else the user's cache folder
+(platformdirs; ~/.cache/groundstation on Linux), one folder per kind.  Deleting it is
+always safe.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import os
+import struct
+import tempfile
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+
+CACHE_ENV = "GROUNDSTATION_CACHE_DIR"
+FORMAT = b"numerics-v1"      # bump when what is stored, or how a key is made, changes
+
+Arrays = tuple[np.ndarray, ...]
+
+
+def cache_root() -> Path:
+    """The folder of all kinds (not created here)."""
+    root = os.environ.get(CACHE_ENV)
+    if not root:
+        import platformdirs
+
+        root = platformdirs.user_cache_dir("groundstation", appauthor=False)
+    return Path(root)
+
+
+def scipy_version() -> str:
+    import scipy          # the package alone, about 10 ms: none of its subpackages
+
+    return scipy.__version__
+
+
+def input_key(kind: str, version: str, inputs: Sequence) -> str:
+    """Every input bit for bit, in order, with its type and shape, and the version of
+    the library that computes the result (a new version may compute it differently)."""
+    h = hashlib.sha256(FORMAT + b"\0" + kind.encode() + b"\0" + version.encode())
+    for value in inputs:
+        a = np.ascontiguousarray(value)
+        if a.dtype == object:
+            raise TypeError(f"{kind}: an input of type {type(value).__name__} cannot be keyed")
+        h.update(struct.pack("<B", a.ndim) + struct.pack(f"<{a.ndim}q", *a.shape))
+        h.update(a.dtype.str.encode() + b"\0" + a.tobytes())
+    return h.hexdigest()
+
+
+def _read(path: Path) -> Arrays | None:
+    try:
+        # the bytes first, then parsed: a damaged file must not leave a handle open
+        with np.load(io.BytesIO(path.read_bytes()), allow_pickle=False) as f:
+            return tuple(f[f"a{i}"] for i in range(len(f.files)))
+    except Exception:       # missing, truncated, not an archive, a member missing: a miss
+        return None
+
+
+def _write(path: Path, arrays: Arrays) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=".", suffix=".npz")
+        try:
+            with os.fdopen(fd, "wb") as f:
+                np.savez(f, **{f"a{i}": a for i, a in enumerate(arrays)})
+            os.replace(tmp, path)
+        except BaseException:
+            Path(tmp).unlink(missing_ok=True)
+            raise
+    except OSError:
+        pass            # a read-only folder or a full disk: the result was computed all the same
+
+
+def cached_arrays(kind: str, version: str, inputs: Sequence, compute: Callable[[], Arrays],
+                  valid: Callable[[Arrays], bool]) -> Arrays:
+    """compute() - or what it returned for these exact inputs before, if that is still
+    on disk and `valid` accepts it.  `valid` also knows how many arrays there are: a
+    result it refuses is never written, and one read back that it refuses is computed
+    again."""
+    path = cache_root() / kind / f"{input_key(kind, version, inputs)}.npz"
+    arrays = _read(path)
+    if arrays is not None and valid(arrays):
+        return arrays
+    arrays = tuple(np.asarray(a) for a in compute())
+    if valid(arrays):
+        _write(path, arrays)
+    return arrays
