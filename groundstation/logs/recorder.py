@@ -246,6 +246,9 @@ class Recorder:
         self._status_thread = threading.Thread(target=self._watch, name="gs-recorder-status",
                                                daemon=True)
         self._status_thread.start()
+        if self.standby is not None:
+            # the spare for the next recording, spawned only now that this one has started
+            self.standby.prepare()
         return self.path
 
     def _start_writer(self, path: Path, run: int, timeout: float) -> Started:

@@ -73,8 +73,8 @@ class SpareWriter:
 
 class WriterStandby:
     """Keeps writers waiting for recordings: one spawned ahead, and those handed back
-    after a clean stop.  `take()` hands one over (and spawns the next one when none
-    is left waiting); `give_back()` returns one; `close()` ends those waiting.
+    after a clean stop.  `prepare()` spawns one when none waits, `take()` hands one
+    over; `give_back()` returns one; `close()` ends those waiting.
     Thread-safe."""
 
     def __init__(self, queue_blocks: int = 20000) -> None:
@@ -101,9 +101,10 @@ class WriterStandby:
 
     def take(self, queue_blocks: int) -> SpareWriter | None:
         """A waiting writer that is alive and fits (its queue's size), the one handed
-        back last first: it has certainly finished its imports.  When none is left
-        waiting, a new spare is spawned for the recording after this one.  None: start
-        a writer the usual way."""
+        back last first: it has certainly finished its imports.  None: start a writer
+        the usual way.  The spare for the recording after this one is spawned by
+        `prepare()` once this one has started (Recorder.start): spawned here, its
+        imports took the CPU the recording's own start was waiting for."""
         with self._lock:
             if self._closed:
                 return None
@@ -114,8 +115,6 @@ class WriterStandby:
                     chosen = spare
                 else:
                     spare.discard()
-            if not self._waiting:
-                self._waiting.append(self._spawn())
             if chosen is not None:
                 self.used += 1
                 self.reused += bool(chosen.recordings)

@@ -83,6 +83,30 @@ def test_a_writer_whose_recording_failed_is_not_used_again(tmp_path, dictionary)
         standby.close()
 
 
+def test_the_next_spare_is_spawned_once_the_recording_has_started_not_when_taken(tmp_path, dictionary):
+    """A spare spawned while the recording that took the last one creates its file would
+    take the CPU that start waits for: `take` spawns nothing, `Recorder.start` asks for
+    the next spare once it has its file."""
+    standby = WriterStandby()
+    try:
+        standby.prepare()
+        [spare_pid] = standby.waiting_pids()
+        taken = standby.take(standby.queue_blocks)
+        assert taken.proc.pid == spare_pid
+        assert standby.waiting_pids() == [] and standby.spawned == 1
+        standby.give_back(taken)
+        rec = Recorder(dictionary, tmp_path, test_name="next", standby=standby)
+        rec.start()
+        try:
+            assert rec._proc.pid == spare_pid
+            [next_pid] = standby.waiting_pids()            # spawned by the start, after it
+            assert next_pid != spare_pid and standby.spawned == 2
+        finally:
+            assert rec.stop().state == "stopped"
+    finally:
+        standby.close()
+
+
 def test_a_reused_writer_lowers_its_priority_once_not_once_a_recording(tmp_path, dictionary):
     standby = WriterStandby()
     try:
