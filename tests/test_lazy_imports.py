@@ -94,3 +94,18 @@ def test_checking_a_campaign_imports_neither_scipy_signal_nor_scipy_linalg():
     assert {"groundstation.params.design_file", "groundstation.basemotion.synthesis"} <= loaded
     for heavy in ("scipy.signal", "scipy.linalg"):
         assert heavy not in loaded, heavy
+
+
+def test_a_fast_campaign_launches_its_simulator_before_importing_numpy():
+    """`campaign run --fast`: the child's start (its imports and numba's cache, the longest
+    thing before the first run) begins before the command imports numpy."""
+    loaded = _loaded_after(
+        "import groundstation.sim.launch_ahead as la, sys\n"
+        "seen = []\n"
+        "la.launch_ahead = lambda **kw: seen.append('numpy' in sys.modules)\n"
+        "from groundstation.cli.campaign import _simulator_ahead\n"
+        "import argparse\n"
+        "_simulator_ahead(argparse.Namespace(resume=None, file='profiles/campaigns/relative_steps.toml',"
+        " generator='auto'), {'fast': True})\n"
+        "assert seen == [False], seen")
+    assert "groundstation.sim.stepped_process" in loaded

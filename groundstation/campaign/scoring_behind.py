@@ -9,10 +9,11 @@ row from here instead of scoring it again.
     metrics = campaign_metrics(report, campaign, scored=behind)
     behind.close()
 
-Why a thread, not a process: the campaign process has imported what scoring needs
-(numpy, h5py, scipy.signal) already, and a log's scoring is mostly numpy and HDF5 reads,
-which let the recording's own thread run; a process would pay a fresh interpreter's
-imports (about a CPU-second) for tens of milliseconds of work per log.
+Why a thread, not a process: the campaign process has imported numpy and h5py already,
+the thread imports the rest (scipy.signal, the analysis) as soon as it is made - while
+the session starts and waits for the simulator's child - and a log's scoring is mostly
+numpy and HDF5 reads, which let the recording's own thread run; a process would pay a
+fresh interpreter's imports (about a CPU-second) for tens of milliseconds of work per log.
 
 A row is scored with its run's status left empty (it is known only when the campaign
 ends); `take` hands back the row and its reference results and the caller fills the
@@ -64,6 +65,10 @@ class ScoringBehind:
         self._recordings_to_come = sum(s.action == "start_recording" for s in campaign.steps)
         #: how many rows `take` handed back scored here (the rest were scored at the end)
         self.taken = 0
+        # scoring's imports (scipy.signal, the analysis, the log reader: 0.4 s) at once,
+        # while the session starts and waits for the simulator's child; the first log
+        # handed over would otherwise pay them in the middle of the next run
+        self._pool.submit(import_scoring)
 
     def submit(self, recording: dict[str, Any]) -> None:
         """A recording that ended, as the report will list it (files, name, run,
@@ -111,6 +116,14 @@ class ScoringBehind:
         self._scored.clear()
         if pool is not None:
             pool.shutdown(wait=True, cancel_futures=True)
+
+
+def import_scoring() -> None:
+    """What scoring.py imports when it scores a log; a failure here is scoring's own, said
+    where a log is scored."""
+    with contextlib.suppress(ImportError):
+        from ..analysis import analyze_log  # noqa: F401
+        from ..logs import LogReader  # noqa: F401
 
 
 def _import_charts() -> None:

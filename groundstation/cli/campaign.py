@@ -218,14 +218,16 @@ def _run(args) -> int:
     from ..campaign import CampaignReport, load_campaign
     from ..campaign.designs_ahead import discretise_designs_ahead
     from ..campaign.run_setup import resolve_setup
-    from ..campaign.scoring_behind import ScoringBehind
+    from ..campaign.scoring_behind import ScoringBehind, import_scoring
     from ..core.dictionary import load_dictionary
 
     given = {k: getattr(args, k) for k in ("device", "fast", "fast_sim", "seed", "testbed", "log_folder")
              if getattr(args, k) is not None}
+    # first of all, before this process imports numpy: the simulator's child starts (0.45
+    # s, the longest thing before the first run) while this one loads and checks
+    _simulator_ahead(args, given)
     try:
         dictionary = load_dictionary(getattr(args, "protocol_dir", None))
-        _simulator_ahead(args, given, dictionary)
         c = load_campaign(args.file, dictionary)
         resume = CampaignReport.load(args.resume) if args.resume else None
         setup, notes = resolve_setup(given, resume.setup if resume else None,
@@ -252,6 +254,10 @@ def _run(args) -> int:
     t0 = time.monotonic()
     # while the simulator's child starts: a new design's imports paid here, not in a run
     discretise_designs_ahead(c, dictionary)
+    if not args.no_analysis:
+        # scoring's imports too, here rather than in its thread: this thread would only
+        # wait for the child, and a thread importing beside it measured 3 % slower
+        import_scoring()
     scoring = None if args.no_analysis else ScoringBehind(c)
     try:
         return _run_and_score(args, c, setup, folder, report_path, resume, scoring, t0)
@@ -304,16 +310,15 @@ def _run_and_score(args, c, setup: dict, folder: Path, report_path: Path, resume
     return EXIT_OK if report.status == "completed" else EXIT_FAILED
 
 
-def _simulator_ahead(args, given: dict, dictionary) -> None:
+def _simulator_ahead(args, given: dict) -> None:
     """With `--device sim --fast` (the simulator in a child process), launch that child
     now, so that its start overlaps the campaign's check (sim/launch_ahead.py).  A guess
     from the campaign file's testbed: when anything about it is off, nothing is launched
     and the check says what is wrong; a child the session does not take is ended."""
-    from ..core.kinds import SIMULATED_DEVICE, FastSim
+    from ..core.kinds import SIMULATED_DEVICE, FastSim, wants_simulated_generator
     from ..core.tomlfile import read_toml
     from ..plant.testbed import load_testbed
     from ..sim.launch_ahead import launch_ahead
-    from ..station.rig import wants_simulated_generator
 
     if (args.resume or not given.get("fast") or given.get("device", SIMULATED_DEVICE) != SIMULATED_DEVICE
             or given.get("fast_sim", FastSim.PROCESS) != FastSim.PROCESS):
@@ -326,7 +331,7 @@ def _simulator_ahead(args, given: dict, dictionary) -> None:
     except (GroundStationError, OSError, KeyError, TypeError, ValueError):
         return
     generator = None if args.generator == GeneratorChoice.NONE else args.generator
-    launch_ahead(dictionary, testbed=testbed, seed=given.get("seed", 0),
+    launch_ahead(testbed=testbed, seed=given.get("seed", 0),
                  generator=wants_simulated_generator(generator, inertial=inertial))
 
 

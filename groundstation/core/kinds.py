@@ -53,6 +53,12 @@ class GeneratorChoice(StrEnum):
     SIM = "sim"                   # the simulated generator
 
 
+def wants_simulated_generator(choice: str | None, *, inertial: bool) -> bool:
+    """Whether a session on the simulated testbed starts the simulator's generator:
+    asked for ("sim"), or "auto" on an inertial rig (the base moves only there)."""
+    return choice == GeneratorChoice.SIM or (choice == GeneratorChoice.AUTO and inertial)
+
+
 #: the device word that starts the simulated testbed (anything else is an address)
 SIMULATED_DEVICE = "sim"
 

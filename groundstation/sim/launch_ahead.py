@@ -27,21 +27,25 @@ _lock = threading.Lock()
 _waiting: list[SteppedSimulatorProcess] = []
 
 
-def launch_ahead(dictionary, *, testbed, seed: int = 0, generator: bool = False) -> None:
-    """Launch the child of this simulator now, for the next session that asks for it."""
-    device = SteppedSimulatorProcess(dictionary, testbed=testbed, seed=seed, generator=generator)
+def launch_ahead(*, testbed, seed: int = 0, generator: bool = False) -> None:
+    """Launch the child of this simulator now, for the next session that asks for it.
+    No dictionary is needed yet (the child loads its own), so a command can launch it
+    before it has imported numpy; the session that takes it gives it its own."""
+    device = SteppedSimulatorProcess(None, testbed=testbed, seed=seed, generator=generator)
     device.launch()
     with _lock:
         _waiting.append(device)
 
 
 def take(wanted: SteppedSimulatorProcess) -> SteppedSimulatorProcess:
-    """A child launched ahead with `wanted`'s command line and dictionary, else `wanted`
-    itself (not launched)."""
+    """A child launched ahead with `wanted`'s command line (which is all that makes one
+    child differ from another), now with `wanted`'s dictionary; else `wanted` itself
+    (not launched)."""
     with _lock:
         for device in _waiting:
-            if device.args == wanted.args and device.dictionary.hash == wanted.dictionary.hash:
+            if device.args == wanted.args:
                 _waiting.remove(device)
+                device.dictionary = wanted.dictionary
                 return device
     return wanted
 

@@ -133,12 +133,6 @@ def open_link(dictionary: Dictionary, address: str, *, local: LocalSimulator | N
     return client
 
 
-def wants_simulated_generator(choice: str | None, *, inertial: bool) -> bool:
-    """Whether a session on the simulated testbed starts the simulator's generator:
-    asked for ("sim"), or "auto" on an inertial rig (the base moves only there)."""
-    return choice == GeneratorChoice.SIM or (choice == GeneratorChoice.AUTO and inertial)
-
-
 def named_generator(choice: str | None) -> str | None:
     """The VISA resource of a real generator the user named, or None for the words
     (auto, none, sim) and for no choice."""

@@ -52,14 +52,13 @@ from .clock import ScriptAborted, SteppedClock, WallClock
 from ..core.contracts import BaseMotionInstrument, DeviceLink
 from ..core.dictionary import Dictionary, load_dictionary
 from ..core.errors import GroundStationError
-from ..core.kinds import SIMULATED_DEVICE, BetweenSteps, LinkState
+from ..core.kinds import SIMULATED_DEVICE, BetweenSteps, LinkState, wants_simulated_generator
 from ..params.upload import MemoryHistory, ParameterHistory, ParameterLoader
 from ..plant.testbed import load_testbed
 from .generator_desk import GeneratorDesk
 from .options import ConsolePublishing, FastSimOptions
 from .recording import RecordingSlot, device_record
-from .rig import (LocalSimulator, named_generator, open_link, open_testbed_generator,
-                  start_simulator, wants_simulated_generator)
+from .rig import LocalSimulator, named_generator, open_link, open_testbed_generator, start_simulator
 from .settling import settle_rig
 from .start_state import StartCriteria
 from .tracker import DeviceStateTracker

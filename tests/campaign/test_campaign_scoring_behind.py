@@ -104,3 +104,29 @@ def test_a_closed_one_takes_nothing_and_never_raises(behind_run):
     assert closed.take(rec["files"][0], rec["run"], rec["variables"], rec["name"], None) is None
     closed.close()                                   # twice: fine
     assert closed.taken == 0
+
+
+def test_scorings_imports_are_done_as_soon_as_it_is_made():
+    """Made before the session starts, its thread imports scipy.signal and the analysis
+    while the simulator's child starts - not when the first log arrives, in the middle
+    of the next run.  In a fresh interpreter: nothing of it before, all of it after,
+    with no log handed over."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[2]
+    code = ("import sys, time\n"
+            "from groundstation.campaign import load_campaign\n"
+            "from groundstation.campaign.scoring_behind import ScoringBehind\n"
+            f"c = load_campaign({str(root / 'profiles' / 'campaigns' / 'relative_steps.toml')!r})\n"
+            "before = [m in sys.modules for m in ('scipy.signal', 'groundstation.analysis.log_metrics')]\n"
+            "b = ScoringBehind(c)\n"
+            "deadline = time.monotonic() + 60\n"
+            "while 'groundstation.analysis.log_metrics' not in sys.modules and time.monotonic() < deadline:\n"
+            "    time.sleep(0.01)\n"
+            "b.close()\n"
+            "print(before, [m in sys.modules for m in ('scipy.signal', 'groundstation.analysis.log_metrics')])")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         timeout=120, cwd=root).stdout.split("\n")[-2]
+    assert out == "[False, False] [True, True]"

@@ -35,19 +35,20 @@ def _simulator_children() -> list[int]:
     return out
 
 
-def test_the_session_takes_the_simulator_launched_for_it(tmp_path, dictionary):
-    launch_ahead.launch_ahead(dictionary, testbed=RELATIVE, seed=3)
+def test_the_session_takes_the_simulator_launched_for_it(tmp_path):
+    launch_ahead.launch_ahead(testbed=RELATIVE, seed=3)    # before any dictionary is loaded
     [launched] = [d.proc.pid for d in launch_ahead._waiting]
     with Testbed("sim", testbed=RELATIVE, fast=IN_A_CHILD, seed=3, log_folder=tmp_path,
                  history=tmp_path / "history", echo=lambda text: None) as tb:
         assert tb.simulator.proc.pid == launched
+        assert tb.simulator.dictionary is not None             # the session's, given on taking
         assert launch_ahead._waiting == []
         tb.dwell(0.5)                                      # and it runs the session
     wait_for(lambda: not process_alive(launched))
 
 
-def test_a_session_asking_for_another_simulator_starts_its_own(tmp_path, dictionary):
-    launch_ahead.launch_ahead(dictionary, testbed=RELATIVE, seed=3)
+def test_a_session_asking_for_another_simulator_starts_its_own(tmp_path):
+    launch_ahead.launch_ahead(testbed=RELATIVE, seed=3)
     [launched] = [d.proc.pid for d in launch_ahead._waiting]
     try:
         with Testbed("sim", testbed=RELATIVE, fast=IN_A_CHILD, seed=4, log_folder=tmp_path,
