@@ -158,3 +158,29 @@ def gui_window(qtbot, dictionary, tmp_path):
     yield make
     for session in sessions:
         session.shutdown()
+
+
+@pytest.fixture
+def numerics_cache(tmp_path, monkeypatch):
+    """An empty numerics cache of the test's own (core/numerics_cache.py), the plant's
+    sampled model forgotten in memory too, so that what the test computes is written
+    here; the folder (not created yet)."""
+    from groundstation.core.numerics_cache import CACHE_ENV
+    from groundstation.plant import model as plant_model
+
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "numerics-cache"))
+    plant_model._discretised.cache_clear()
+    return tmp_path / "numerics-cache"
+
+
+def in_fresh_interpreter(code: str, **env: str):
+    """What a fresh interpreter running `code` (with `env` added to this one's) prints as
+    JSON on its last line."""
+    import json
+    import subprocess
+    import sys
+
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         timeout=120, env={**os.environ, **env}).stdout
+    return json.loads(out.splitlines()[-1])
+

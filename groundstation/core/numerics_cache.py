@@ -1,15 +1,15 @@
 """Results of a few pure numerical calls, kept on disk under a key made of their inputs.
 
-Why: two calls a session makes before anything moves need a heavy import for a few
-microseconds of arithmetic.  The controller's sections (scipy.signal's bilinear map and
-section pairing) cost an import of about 0.3 s of CPU - scipy.signal brings scipy.stats,
-scipy.interpolate and scipy.optimize along - and the plant's zero-order hold (a matrix
-exponential) costs scipy.linalg's, about 0.1 s, half of it numpy.f2py, which scipy's
-array-API layer imports.  A fast campaign pays both on the way to its first run: the
-command in its check, the simulator's child before it can say it is ready.  The
-results are a pure function of the inputs and of scipy's version, so they are kept
-under a key made of exactly those, bit for bit (numba keeps its compiled kernels the
-same way), and the import happens only when a key is new.
+Why: a session makes a few calls before anything moves that need a heavy import for a
+few microseconds of arithmetic.  A design's sections (scipy.signal's bilinear map and
+section pairing, at its upload) and the base stage's held response (cont2discrete, when
+a campaign's check synthesises a base motion) cost an import of about 0.3 s of CPU -
+scipy.signal brings scipy.stats, scipy.interpolate and scipy.optimize along - and the
+plant's zero-order hold (a matrix exponential, in the upload's closed-loop check) costs
+scipy.linalg's, about 0.1 s, half of it numpy.f2py, which scipy's array-API layer
+imports.  The results are a pure function of the inputs and of scipy's version, so they
+are kept under a key made of exactly those, bit for bit (numba keeps its compiled
+kernels the same way), and the import happens only when a key is new.
 
 The cache can only save time, never change a result or stop a command: a file that is
 missing, unreadable, damaged or not what its kind expects is computed again (and

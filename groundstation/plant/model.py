@@ -81,9 +81,10 @@ def continuous_model(tb: Testbed) -> tuple[np.ndarray, np.ndarray]:
 def discretise(A: np.ndarray, B: np.ndarray, h: float) -> tuple[np.ndarray, np.ndarray]:
     """Exact zero-order-hold discretisation: expm([[A, B], [0, 0]] h).
 
-    Remembered for the last few (A, B, h): the design workbench re-derives its sampled
-    loop on every edit of a controller, while the plant stays the same, and the stiff
-    gyro dynamics make each matrix exponential cost milliseconds.  Callers get copies."""
+    Remembered for the last few (A, B, h), and kept on disk (core/numerics_cache.py):
+    the design workbench re-derives its sampled loop on every edit of a controller,
+    while the plant stays the same, and the stiff gyro dynamics make each matrix
+    exponential cost milliseconds.  Callers get copies."""
     A, B = np.asarray(A, dtype=float), np.asarray(B, dtype=float)
     Ad, Bd = _discretised(A.shape, A.tobytes(), B.shape, B.tobytes(), float(h))
     return Ad.copy(), Bd.copy()
@@ -96,9 +97,9 @@ def _discretised(a_shape, a_bytes, b_shape, b_bytes, h):
     n, m = B.shape
 
     def compute():
-        # scipy.linalg only here, and only for a plant not sampled before: the
-        # simulator's child and a campaign's first upload would otherwise import it
-        # (0.1 s) for one exponential (core/numerics_cache.py)
+        # scipy.linalg only here, and only for a plant not sampled before: a campaign's
+        # upload check would otherwise import it (0.1 s) for one exponential
+        # (core/numerics_cache.py); the simulator's child imports it anyway, numba does
         from scipy.linalg import expm
 
         M = np.zeros((n + m, n + m))

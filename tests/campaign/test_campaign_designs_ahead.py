@@ -6,45 +6,34 @@ design that cannot be discretised is left for its upload step to report."""
 from __future__ import annotations
 
 import dataclasses
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
-import pytest
+from conftest import in_fresh_interpreter
+
 
 from groundstation.campaign import load_campaign
 from groundstation.campaign.designs_ahead import discretise_designs_ahead
 from groundstation.core.dictionary import load_dictionary
 from groundstation.core.numerics_cache import CACHE_ENV
-from groundstation.plant import model as plant_model
 
 ROOT = Path(__file__).resolve().parents[2]
 RELATIVE_STEPS = ROOT / "profiles" / "campaigns" / "relative_steps.toml"
-
-
-@pytest.fixture
-def cache(tmp_path, monkeypatch) -> Path:
-    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
-    plant_model._discretised.cache_clear()     # the copy in memory: this folder starts empty
-    return tmp_path / "cache"
 
 
 def _kept(cache: Path, kind: str) -> int:
     return len(list((cache / kind).glob("*.npz"))) if (cache / kind).exists() else 0
 
 
-def test_every_uploaded_design_is_discretised_once(cache):
+def test_every_uploaded_design_is_discretised_once(numerics_cache):
     c = load_campaign(RELATIVE_STEPS)
     assert discretise_designs_ahead(c, load_dictionary()) == 2          # design 1 and design 2
-    assert _kept(cache, "sections") >= 2 and _kept(cache, "zero_order_hold") == 1
-    before = sorted(p.stat().st_mtime_ns for p in (cache / "sections").glob("*.npz"))
+    assert _kept(numerics_cache, "sections") >= 2 and _kept(numerics_cache, "zero_order_hold") == 1
+    before = sorted(p.stat().st_mtime_ns for p in (numerics_cache / "sections").glob("*.npz"))
     assert discretise_designs_ahead(c, load_dictionary()) == 2
-    assert sorted(p.stat().st_mtime_ns for p in (cache / "sections").glob("*.npz")) == before
+    assert sorted(p.stat().st_mtime_ns for p in (numerics_cache / "sections").glob("*.npz")) == before
 
 
-def test_after_it_an_upload_imports_no_scipy(cache):
+def test_after_it_an_upload_imports_no_scipy(numerics_cache):
     """What the runs then do - the upload's table and its closed-loop check - in a fresh
     interpreter: no scipy.signal, no scipy.linalg."""
     discretise_designs_ahead(load_campaign(RELATIVE_STEPS), load_dictionary())
@@ -53,12 +42,10 @@ def test_after_it_an_upload_imports_no_scipy(cache):
             "from groundstation.params.loop_response import loop_model\n"
             f"loop_model(load_design({str(design)!r}))\n"
             "print(json.dumps([m for m in ('scipy.signal', 'scipy.linalg') if m in sys.modules]))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         timeout=120, env={**os.environ, CACHE_ENV: str(cache)}).stdout
-    assert json.loads(out.splitlines()[-1]) == []
+    assert in_fresh_interpreter(code, **{CACHE_ENV: str(numerics_cache)}) == []
 
 
-def test_a_design_that_cannot_be_discretised_is_left_to_its_upload(cache, tmp_path):
+def test_a_design_that_cannot_be_discretised_is_left_to_its_upload(numerics_cache, tmp_path):
     """A design file gone or garbled since the check: nothing raised, the others done."""
     c = load_campaign(RELATIVE_STEPS)
     garbled = tmp_path / "garbled.toml"

@@ -6,16 +6,14 @@ foreign or unwritable cache costs time, never a result or the command."""
 
 from __future__ import annotations
 
-import json
-import os
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from scipy import signal
 from scipy.linalg import expm
+
+from conftest import in_fresh_interpreter
 
 from groundstation.core.numerics_cache import CACHE_ENV, cached_arrays, input_key
 from groundstation.params.design_file import load_design
@@ -27,13 +25,6 @@ from groundstation.plant.testbed import load_testbed
 ROOT = Path(__file__).resolve().parents[2]
 DESIGN = ROOT / "profiles" / "controllers" / "relative_design1.toml"
 TESTBED = ROOT / "profiles" / "testbeds" / "relative_2dof.toml"
-
-
-@pytest.fixture
-def cache(tmp_path, monkeypatch) -> Path:
-    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
-    plant_model._discretised.cache_clear()     # the copy in memory: this folder starts empty
-    return tmp_path / "cache"
 
 
 def _files(folder: Path) -> list[Path]:
@@ -49,19 +40,19 @@ def _scipy_sections(tf, prewarp_hz) -> np.ndarray:
     return np.atleast_2d(signal.zpk2sos(zd, pd, kd))
 
 
-def test_sections_read_back_are_bit_for_bit_the_computed_ones(cache):
+def test_sections_read_back_are_bit_for_bit_the_computed_ones(numerics_cache):
     design = load_design(DESIGN)
     cold = _sections(design)
-    written = _files(cache / "sections")
+    written = _files(numerics_cache / "sections")
     assert written, "nothing was kept"
     stamps = [p.stat().st_mtime_ns for p in written]
     warm = _sections(design)
-    assert [p.stat().st_mtime_ns for p in _files(cache / "sections")] == stamps   # read, not rewritten
+    assert [p.stat().st_mtime_ns for p in _files(numerics_cache / "sections")] == stamps   # read, not rewritten
     for name in cold:
         assert cold[name].tobytes() == warm[name].tobytes(), name
 
 
-def test_a_kept_result_is_what_scipy_gives_for_those_inputs(cache):
+def test_a_kept_result_is_what_scipy_gives_for_those_inputs(numerics_cache):
     design = load_design(DESIGN)
     for tf in design.cascades.values():
         inputs = (np.asarray(tf.zeros, complex), np.asarray(tf.poles, complex), float(tf.gain),
@@ -72,10 +63,10 @@ def test_a_kept_result_is_what_scipy_gives_for_those_inputs(cache):
         assert ours.tobytes() == _scipy_sections(tf, design.prewarp_hz).tobytes()
 
 
-def test_the_zero_order_hold_read_back_equals_the_matrix_exponential(cache):
+def test_the_zero_order_hold_read_back_equals_the_matrix_exponential(numerics_cache):
     tb = load_testbed(TESTBED)
     cold = discrete_model(tb)
-    assert _files(cache / "zero_order_hold")
+    assert _files(numerics_cache / "zero_order_hold")
     plant_model._discretised.cache_clear()          # the copy in memory too: read from disk
     warm = discrete_model(tb)
     assert cold.Ad.tobytes() == warm.Ad.tobytes() and cold.Bd.tobytes() == warm.Bd.tobytes()
@@ -88,10 +79,10 @@ def test_the_zero_order_hold_read_back_equals_the_matrix_exponential(cache):
 
 
 @pytest.mark.parametrize("damage", ["truncated", "garbage", "wrong shape", "not finite"])
-def test_a_damaged_file_is_computed_again_and_replaced(cache, damage):
+def test_a_damaged_file_is_computed_again_and_replaced(numerics_cache, damage):
     design = load_design(DESIGN)
     good = _sections(design)
-    for path in _files(cache / "sections"):
+    for path in _files(numerics_cache / "sections"):
         if damage == "truncated":
             path.write_bytes(path.read_bytes()[:40])
         elif damage == "garbage":
@@ -117,7 +108,7 @@ def test_a_folder_that_cannot_be_written_is_not_used(tmp_path, monkeypatch):
     assert blocker.read_text().startswith("the cache")
 
 
-def test_a_result_refused_as_invalid_is_never_kept(cache):
+def test_a_result_refused_as_invalid_is_never_kept(numerics_cache):
     calls = []
 
     def compute():
@@ -126,7 +117,7 @@ def test_a_result_refused_as_invalid_is_never_kept(cache):
 
     for _ in range(2):
         cached_arrays("demo", "1", (1.0,), compute, lambda a: bool(np.all(np.isfinite(a[0]))))
-    assert len(calls) == 2 and not _files(cache)
+    assert len(calls) == 2 and not _files(numerics_cache)
 
 
 def test_the_key_is_every_input_bit_and_the_librarys_version():
@@ -143,7 +134,7 @@ def test_the_key_is_every_input_bit_and_the_librarys_version():
         input_key("k", "1", ({"a": 1},))
 
 
-def test_results_saved_are_read_as_the_sections_of_another_process(cache):
+def test_results_saved_are_read_as_the_sections_of_another_process(numerics_cache):
     """What one command wrote, the next reads: a fresh interpreter discretises from the file."""
     design = load_design(DESIGN)
     mine = {name: s.tolist() for name, s in _sections(design).items()}
@@ -151,19 +142,17 @@ def test_results_saved_are_read_as_the_sections_of_another_process(cache):
             "from groundstation.params.discretise import discretise_design\n"
             f"d = discretise_design(load_design({str(DESIGN)!r}))\n"
             "import sys\nprint(json.dumps([{n: c.sos.tolist() for n, c in d.items()}, 'scipy.signal' in sys.modules]))")
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
-                         timeout=120, env={**os.environ, CACHE_ENV: str(cache)}).stdout
-    theirs, imported = json.loads(out.splitlines()[-1])
+    theirs, imported = in_fresh_interpreter(code, **{CACHE_ENV: str(numerics_cache)})
     assert theirs == mine and imported is False
 
 
-def test_the_base_stages_held_response_read_back_equals_scipys(cache):
+def test_the_base_stages_held_response_read_back_equals_scipys(numerics_cache):
     from groundstation.basemotion import BaseStageModel
 
     stage = BaseStageModel.from_testbed(load_testbed(ROOT / "profiles" / "testbeds" / "inertial_2dof.toml"))
     f = np.linspace(0.1, 200.0, 57)
     cold = stage.held_response(f, 1 / 1200)
-    assert _files(cache / "held_stage")
+    assert _files(numerics_cache / "held_stage")
     warm = stage.held_response(f, 1 / 1200)
     num, den = stage._continuous()
     numd, dend, _ = signal.cont2discrete((num, den), 1 / 1200, method="zoh")
