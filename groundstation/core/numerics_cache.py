@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import logging
 import os
 import struct
 import tempfile
@@ -31,6 +32,8 @@ from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
+
+log = logging.getLogger(__name__)
 
 CACHE_ENV = "GROUNDSTATION_CACHE_DIR"
 FORMAT = b"numerics-v1"      # bump when what is stored, or how a key is made, changes
@@ -87,8 +90,8 @@ def _write(path: Path, arrays: Arrays) -> None:
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
-    except OSError:
-        pass            # a read-only folder or a full disk: the result was computed all the same
+    except OSError as exc:      # a read-only folder or a full disk: computed all the same
+        log.debug("numerics cache: %s not kept (%s)", path.name, exc)
 
 
 def cached_arrays(kind: str, version: str, inputs: Sequence, compute: Callable[[], Arrays],
