@@ -41,13 +41,18 @@ FORMAT = b"numerics-v1"      # bump when what is stored, or how a key is made, c
 Arrays = tuple[np.ndarray, ...]
 
 
-def cache_root() -> Path:
-    """The folder of all kinds (not created here)."""
+def cache_root() -> Path | None:
+    """The folder of all kinds (not created here); None when the user's cache folder
+    cannot be named (no home directory): then nothing is kept."""
     root = os.environ.get(CACHE_ENV)
     if not root:
         import platformdirs
 
-        root = platformdirs.user_cache_dir("groundstation", appauthor=False)
+        try:
+            root = platformdirs.user_cache_dir("groundstation", appauthor=False)
+        except Exception as exc:        # whatever it is, the result is computed all the same
+            log.debug("numerics cache: no cache folder (%s)", exc)
+            return None
     return Path(root)
 
 
@@ -100,11 +105,12 @@ def cached_arrays(kind: str, version: str, inputs: Sequence, compute: Callable[[
     on disk and `valid` accepts it.  `valid` also knows how many arrays there are: a
     result it refuses is never written, and one read back that it refuses is computed
     again."""
-    path = cache_root() / kind / f"{input_key(kind, version, inputs)}.npz"
-    arrays = _read(path)
+    root = cache_root()
+    path = None if root is None else root / kind / f"{input_key(kind, version, inputs)}.npz"
+    arrays = None if path is None else _read(path)
     if arrays is not None and valid(arrays):
         return arrays
     arrays = tuple(np.asarray(a) for a in compute())
-    if valid(arrays):
+    if path is not None and valid(arrays):
         _write(path, arrays)
     return arrays

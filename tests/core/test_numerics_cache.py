@@ -159,3 +159,20 @@ def test_the_base_stages_held_response_read_back_equals_scipys(numerics_cache):
     z = np.exp(2j * np.pi * f / 1200)
     direct = np.polyval(np.ravel(numd), z) / np.polyval(dend, z)
     assert cold.tobytes() == warm.tobytes() == direct.tobytes()
+
+
+def test_no_cache_folder_to_be_named_is_no_cache(monkeypatch):
+    """Without GROUNDSTATION_CACHE_DIR and no user cache folder to be had (platformdirs
+    raising, as with no home directory), the sections are computed as always."""
+    import platformdirs
+
+    def no_home(*args, **kwargs):
+        raise RuntimeError("Could not determine home directory.")
+
+    monkeypatch.delenv(CACHE_ENV)
+    monkeypatch.setattr(platformdirs, "user_cache_dir", no_home)
+    design = load_design(DESIGN)
+    sections = _sections(design)
+    for name, tf in design.cascades.items():
+        expected = _scipy_sections(tf, design.prewarp_hz)
+        assert sections[name].shape == expected.shape, name
