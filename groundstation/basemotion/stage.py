@@ -91,8 +91,7 @@ def _held(num, den, sample_interval_s: float) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(numd, dtype=float), np.asarray(dend, dtype=float)
 
     def valid(arrays) -> bool:
-        return (len(arrays) == 2 and arrays[1].ndim == 1 and arrays[1].size == len(den)
-                and all(a.dtype == np.float64 and np.all(np.isfinite(a)) for a in arrays))
+        return len(arrays) == 2 and arrays[1].ndim == 1 and arrays[1].size == len(den)
 
     inputs = (np.asarray(num, dtype=float), np.asarray(den, dtype=float), sample_interval_s)
     numd, dend = cached_arrays("held_stage", scipy_version(), inputs, compute, valid)

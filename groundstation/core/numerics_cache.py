@@ -99,18 +99,26 @@ def _write(path: Path, arrays: Arrays) -> None:
         log.debug("numerics cache: %s not kept (%s)", path.name, exc)
 
 
+def _finite_floats(arrays: Arrays) -> bool:
+    return all(a.dtype == np.float64 and bool(np.all(np.isfinite(a))) for a in arrays)
+
+
 def cached_arrays(kind: str, version: str, inputs: Sequence, compute: Callable[[], Arrays],
                   valid: Callable[[Arrays], bool]) -> Arrays:
     """compute() - or what it returned for these exact inputs before, if that is still
-    on disk and `valid` accepts it.  `valid` also knows how many arrays there are: a
-    result it refuses is never written, and one read back that it refuses is computed
-    again."""
+    on disk.  Every array kept is finite float64; `valid` is the kind's own check of how
+    many arrays there are and their shapes.  A result either check refuses is never
+    written, and one read back that either refuses is computed again."""
+
+    def kept(arrays: Arrays) -> bool:
+        return _finite_floats(arrays) and valid(arrays)
+
     root = cache_root()
     path = None if root is None else root / kind / f"{input_key(kind, version, inputs)}.npz"
     arrays = None if path is None else _read(path)
-    if arrays is not None and valid(arrays):
+    if arrays is not None and kept(arrays):
         return arrays
     arrays = tuple(np.asarray(a) for a in compute())
-    if path is not None and valid(arrays):
+    if path is not None and kept(arrays):
         _write(path, arrays)
     return arrays

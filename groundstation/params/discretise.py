@@ -120,9 +120,8 @@ def _bilinear_sections(zeros, poles, gain: float, map_rate_hz: float) -> np.ndar
         return (np.atleast_2d(signal.zpk2sos(zd, pd, kd)),)
 
     def valid(arrays) -> bool:
-        return (len(arrays) == 1 and arrays[0].dtype == np.float64 and arrays[0].ndim == 2
-                and arrays[0].shape[0] >= 1 and arrays[0].shape[1] == 6
-                and bool(np.all(np.isfinite(arrays[0]))))
+        return len(arrays) == 1 and arrays[0].ndim == 2 and arrays[0].shape[0] >= 1 \
+            and arrays[0].shape[1] == 6
 
     inputs = (np.asarray(zeros, dtype=complex), np.asarray(poles, dtype=complex),
               float(gain), float(map_rate_hz))

@@ -108,15 +108,20 @@ def test_a_folder_that_cannot_be_written_is_not_used(tmp_path, monkeypatch):
     assert blocker.read_text().startswith("the cache")
 
 
-def test_a_result_refused_as_invalid_is_never_kept(numerics_cache):
+@pytest.mark.parametrize("result, kinds_check", [
+    (np.array([np.inf]), lambda a: True),                 # not finite: refused by the cache itself
+    (np.array([1.0], dtype=np.float32), lambda a: True),  # not float64: likewise
+    (np.array([1.0, 2.0]), lambda a: a[0].size == 1),     # the kind's own check refuses it
+])
+def test_a_result_refused_as_invalid_is_never_kept(numerics_cache, result, kinds_check):
     calls = []
 
     def compute():
         calls.append(1)
-        return (np.array([np.inf]),)
+        return (result,)
 
     for _ in range(2):
-        cached_arrays("demo", "1", (1.0,), compute, lambda a: bool(np.all(np.isfinite(a[0]))))
+        cached_arrays("demo", "1", (1.0,), compute, kinds_check)
     assert len(calls) == 2 and not _files(numerics_cache)
 
 
